@@ -1,0 +1,1 @@
+"""Sweep plans, capture sessions and the dataset format."""

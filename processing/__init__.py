@@ -1,0 +1,1 @@
+"""Panorama I/O, importance sampling, light disassembling and reflectance-field processing."""

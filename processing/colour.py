@@ -1,0 +1,32 @@
+"""Colour transfer functions and luminance (pure functions on arrays).
+
+Domain and range: linear values are scene-referred float (any non-negative range); encoded values
+are display-referred in [0, 1]. Luminance is Rec. 709 / sRGB Y.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["REC709_LUMINANCE", "linear_to_srgb", "luminance", "srgb_to_linear"]
+
+#: Rec. 709 luminance weights of linear R, G, B (ITU-R BT.709-6, item 3.2).
+REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+
+
+def srgb_to_linear(encoded: NDArray[np.floating]) -> NDArray[np.float32]:
+    """Decode sRGB values in [0, 1] to linear (IEC 61966-2-1 piecewise curve); same shape."""
+    v = np.asarray(encoded, dtype=np.float32)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def linear_to_srgb(linear: NDArray[np.floating]) -> NDArray[np.float32]:
+    """Encode linear values to sRGB in [0, 1] (clipped first); same shape."""
+    v = np.clip(np.asarray(linear, dtype=np.float32), 0.0, 1.0)
+    return np.where(v <= 0.0031308, v * 12.92, 1.055 * v ** (1 / 2.4) - 0.055).astype(np.float32)
+
+
+def luminance(rgb: NDArray[np.floating]) -> NDArray[np.float32]:
+    """Rec. 709 luminance of linear RGB; shape (..., 3) -> (...), float32."""
+    return (np.asarray(rgb, dtype=np.float32) @ REC709_LUMINANCE).astype(np.float32, copy=False)

@@ -1,0 +1,263 @@
+"""Equirectangular environment panoramas: reading, validating and writing.
+
+In memory a panorama is linear float32 RGB radiance of shape (H, W, 3) with W = 2H, mapped to
+directions as ``rig.directions`` says. Readers: 8/16-bit PNG and JPEG (sRGB-decoded to linear
+unless told otherwise), OpenEXR (any compression the OpenEXR library knows, DWAB included) and
+Radiance ``.hdr``. Writers: EXR (float32 RGB), PNG (sRGB, 8 or 16 bit) and ``.hdr``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import cv2
+import numpy as np
+import OpenEXR
+from numpy.typing import NDArray
+
+from processing.colour import linear_to_srgb, srgb_to_linear
+from rig.atomic import atomic_path
+from rig.directions import rotate_panorama_yaw
+from rig.errors import PanoramaError
+
+__all__ = [
+    "NEGATIVE_TOLERANCE",
+    "PANORAMA_SUFFIXES",
+    "Panorama",
+    "adjust_panorama",
+    "panorama_from_array",
+    "read_image",
+    "read_panorama",
+    "write_panorama",
+]
+
+PANORAMA_SUFFIXES = (".exr", ".hdr", ".pic", ".png", ".jpg", ".jpeg")
+
+#: Negative values no larger than this fraction of the mean value are lossy-compression noise
+#: (DWA-compressed EXRs carry some) and are clamped to zero; larger negatives are refused.
+NEGATIVE_TOLERANCE = 1e-3
+
+Transfer = Literal["srgb", "linear"]
+
+
+@dataclass(frozen=True)
+class Panorama:
+    """A validated equirectangular environment.
+
+    Attributes
+    ----------
+    rgb : ndarray, shape (H, W, 3), float32
+        Linear radiance, finite and non-negative, W = 2H.
+    source : str
+        Where it came from (a file path, or a description for arrays).
+    """
+
+    rgb: NDArray[np.float32]
+    source: str
+
+    @property
+    def height(self) -> int:
+        return int(self.rgb.shape[0])
+
+    @property
+    def width(self) -> int:
+        return int(self.rgb.shape[1])
+
+
+def panorama_from_array(
+    rgb: NDArray[np.floating], *, source: str = "<array>", resample: bool = False
+) -> Panorama:
+    """Validate an array as a panorama (see :func:`read_panorama` for the rules).
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (H, W, 3) or (H, W), linear radiance
+    source : str
+        Named in error messages.
+    resample : bool
+        Resize an image that is not 2:1 to width 2H instead of refusing it.
+    """
+    image = np.asarray(rgb)
+    if image.ndim == 2:
+        image = np.repeat(image[:, :, None], 3, axis=2)
+    if image.ndim != 3 or image.shape[2] not in (3, 4) or min(image.shape[:2]) < 2:
+        raise PanoramaError(f"{source}: expected an (H, W, 3) RGB image, got shape {image.shape}")
+    image = np.ascontiguousarray(image[:, :, :3], dtype=np.float32)
+    height, width = image.shape[:2]
+    if width != 2 * height:
+        if not resample:
+            raise PanoramaError(
+                f"{source}: an equirectangular panorama must be twice as wide as high, got "
+                f"{width}x{height}; pass resample=True (CLI: --resample) to resize it"
+            )
+        image = cv2.resize(image, (2 * height, height), interpolation=cv2.INTER_AREA)
+    finite = np.isfinite(image)
+    if not finite.all():
+        row, col, _ = np.argwhere(~finite)[0]
+        count = int((~finite).sum())
+        raise PanoramaError(
+            f"{source}: {count} NaN or infinite values (first at row {row}, col {col})"
+        )
+    lowest = float(image.min())
+    if lowest < 0.0:
+        if lowest < -NEGATIVE_TOLERANCE * float(np.abs(image).mean()):
+            row, col, _ = np.unravel_index(int(np.argmin(image)), image.shape)
+            raise PanoramaError(
+                f"{source}: negative radiance {lowest:.4g} at row {row}, col {col}; "
+                "light cannot be negative"
+            )
+        image = np.maximum(image, 0.0)
+    if not image.any():
+        raise PanoramaError(f"{source}: the panorama holds no light (every pixel is zero)")
+    return Panorama(rgb=image, source=source)
+
+
+def read_panorama(
+    path: str | os.PathLike[str], *, resample: bool = False, transfer: Transfer | None = None
+) -> Panorama:
+    """Read an equirectangular panorama as linear float32 RGB.
+
+    Parameters
+    ----------
+    path : path to an ``.exr``, ``.hdr``, ``.png``, ``.jpg`` or ``.jpeg`` file
+    resample : bool
+        Resize an image that is not 2:1 to width 2H instead of refusing it.
+    transfer : {"srgb", "linear"}, optional
+        Encoding of PNG/JPEG values; default sRGB (decoded to linear). EXR and HDR are linear.
+
+    Raises
+    ------
+    PanoramaError
+        Unreadable or truncated file, unknown format, not 2:1 (without ``resample``), NaN or
+        infinite values, negative values beyond compression noise, or no light at all.
+    """
+    rgb = read_image(path, transfer=transfer)
+    return panorama_from_array(rgb, source=str(path), resample=resample)
+
+
+def read_image(
+    path: str | os.PathLike[str], *, transfer: Transfer | None = None
+) -> NDArray[np.float32]:
+    """Read an image file as linear float32 (H, W, C) without panorama checks.
+
+    Formats and ``transfer`` as in :func:`read_panorama`. Raises :class:`PanoramaError` for a
+    missing, unknown, truncated or corrupt file.
+    """
+    file = Path(path)
+    suffix = file.suffix.lower()
+    if suffix not in PANORAMA_SUFFIXES:
+        raise PanoramaError(
+            f"{file}: unknown image format {suffix!r}; use one of {PANORAMA_SUFFIXES}"
+        )
+    if not file.is_file():
+        raise PanoramaError(f"{file}: no such file")
+    if suffix == ".exr":
+        return _read_exr(file)
+    return _read_with_opencv(file, transfer)
+
+
+def _read_exr(file: Path) -> NDArray[np.float32]:
+    try:
+        with OpenEXR.File(str(file), separate_channels=True) as exr:
+            channels = {name: channel.pixels for name, channel in exr.channels().items()}
+    except Exception as error:  # the bindings raise RuntimeError or ValueError, by case
+        raise PanoramaError(
+            f"{file}: cannot read as OpenEXR (truncated or corrupt?): {error}"
+        ) from error
+    names = {name.rsplit(".", 1)[-1]: name for name in channels}  # accept layer prefixes
+    if all(c in names for c in "RGB"):
+        planes = [channels[names[c]] for c in "RGB"]
+    elif "Y" in names:
+        planes = [channels[names["Y"]]] * 3
+    else:
+        raise PanoramaError(f"{file}: no R, G, B (or Y) channels, found {sorted(channels)}")
+    return np.stack([np.asarray(p, dtype=np.float32) for p in planes], axis=-1)
+
+
+def _read_with_opencv(file: Path, transfer: Transfer | None) -> NDArray[np.float32]:
+    data = file.read_bytes()
+    suffix = file.suffix.lower()
+    # OpenCV decodes a truncated JPEG without complaint; the end-of-image marker tells.
+    if suffix in (".jpg", ".jpeg") and data.rfind(b"\xff\xd9", max(0, len(data) - 4096)) < 0:
+        raise PanoramaError(f"{file}: JPEG has no end-of-image marker (file truncated?)")
+    image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise PanoramaError(
+            f"{file}: cannot decode as {suffix[1:].upper()} (truncated or corrupt?)"
+        )
+    if image.ndim == 3:
+        image = cv2.cvtColor(
+            image, cv2.COLOR_BGRA2RGB if image.shape[2] == 4 else cv2.COLOR_BGR2RGB
+        )
+    if image.dtype == np.uint8:
+        values = image.astype(np.float32) / 255.0
+    elif image.dtype == np.uint16:
+        values = image.astype(np.float32) / 65535.0
+    elif image.dtype == np.float32:
+        return image  # Radiance HDR: already linear
+    else:
+        raise PanoramaError(f"{file}: unsupported pixel type {image.dtype}")
+    if (transfer or "srgb") == "srgb":
+        return srgb_to_linear(values)
+    return values
+
+
+def write_panorama(
+    path: str | os.PathLike[str], rgb: NDArray[np.floating], *, bits: Literal[8, 16] = 8
+) -> None:
+    """Write linear RGB (H, W, 3) to ``path``, atomically.
+
+    ``.exr``: float32 RGB, ZIP-compressed. ``.hdr``: Radiance RGBE. ``.png``: sRGB-encoded,
+    clipped to [0, 1], with ``bits`` per channel (tone-map before writing for display).
+    """
+    file = Path(path)
+    image = np.ascontiguousarray(np.asarray(rgb, dtype=np.float32)[:, :, :3])
+    suffix = file.suffix.lower()
+    if suffix not in (".exr", ".hdr", ".pic", ".png"):
+        raise PanoramaError(f"{file}: cannot write {suffix!r}; use .exr, .hdr or .png")
+    with atomic_path(file) as temporary:
+        if suffix == ".exr":
+            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+            with OpenEXR.File(header, {"RGB": image}) as exr:
+                exr.write(str(temporary))
+        elif suffix in (".hdr", ".pic"):
+            _imwrite(temporary, image[:, :, ::-1])
+        elif suffix == ".png":
+            scale = 255.0 if bits == 8 else 65535.0
+            dtype = np.uint8 if bits == 8 else np.uint16
+            encoded = np.round(linear_to_srgb(image) * scale).astype(dtype)
+            _imwrite(temporary, encoded[:, :, ::-1])
+
+
+def _imwrite(path: Path, bgr: NDArray[np.generic]) -> None:
+    if not cv2.imwrite(str(path), bgr):
+        raise PanoramaError(f"{path}: OpenCV could not write the image")
+
+
+def adjust_panorama(panorama: Panorama, *, yaw_deg: float = 0.0, exposure: float = 1.0) -> Panorama:
+    """Rotate an environment about ``+z`` and scale its radiance (the lighting controls).
+
+    Parameters
+    ----------
+    panorama : Panorama
+    yaw_deg : float
+        Counter-clockwise rotation seen from above, degrees (light from azimuth phi then
+        arrives from phi + yaw).
+    exposure : float
+        Radiance scale, > 0.
+    """
+    if not (np.isfinite(exposure) and exposure > 0):
+        raise PanoramaError(
+            f"{panorama.source}: exposure must be a positive number, got {exposure}"
+        )
+    if not np.isfinite(yaw_deg):
+        raise PanoramaError(f"{panorama.source}: yaw must be a finite angle, got {yaw_deg}")
+    rgb = panorama.rgb
+    if yaw_deg % 360.0 != 0.0:
+        rgb = rotate_panorama_yaw(rgb, yaw_deg)
+    if exposure != 1.0:
+        rgb = rgb * np.float32(exposure)
+    return Panorama(rgb=np.ascontiguousarray(rgb, dtype=np.float32), source=panorama.source)

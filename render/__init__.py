@@ -1,0 +1,1 @@
+"""Relighting, point splatting, output images and charts."""

@@ -1,0 +1,35 @@
+"""Files of a sampled environment: ``lights.json``, ``overlay.png`` and ``lights.png``."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from processing.environment import EnvironmentLighting, LightingControls, light_environment
+from processing.panorama import Panorama
+from render.overlay import disassembled_picture, sample_overlay, write_png
+from render.tonemap import auto_exposure
+from rig.atomic import write_json_atomic
+
+__all__ = ["write_lighting_outputs"]
+
+
+def write_lighting_outputs(
+    panorama: Panorama, controls: LightingControls, directory: str | os.PathLike[str]
+) -> EnvironmentLighting:
+    """Sample and disassemble ``panorama`` and write the three files into ``directory``.
+
+    ``overlay.png`` shows the tone-mapped panorama with the Voronoi cell borders and samples;
+    ``lights.png`` fills each cell with its light's mean radiance, at the same exposure.
+    """
+    lighting = light_environment(panorama, controls)
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    exposure = auto_exposure(lighting.panorama.rgb)
+    write_json_atomic(out / "lights.json", lighting.to_json())
+    write_png(
+        out / "overlay.png",
+        sample_overlay(lighting.panorama.rgb, lighting.lights, exposure=exposure),
+    )
+    write_png(out / "lights.png", disassembled_picture(lighting.lights, exposure=exposure))
+    return lighting

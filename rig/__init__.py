@@ -1,0 +1,1 @@
+"""Rig hardware, configuration, geometry and the project's shared conventions."""

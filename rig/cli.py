@@ -1,0 +1,123 @@
+"""The ``rig`` command line: thin sub-commands over library functions.
+
+This module and :mod:`rig.demo` are the application layer: they may import every package
+(lazily, so ``rig --help`` stays fast); the library packages keep to the boundaries of
+``docs/architecture.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from rig.errors import RigError
+
+__all__ = ["build_parser", "main"]
+
+
+def _add_sample(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from processing.sampling import SAMPLERS
+
+    p = commands.add_parser(
+        "sample",
+        help="importance-sample a panorama and disassemble its light into K lights",
+        description="Sample an equirectangular panorama into K light directions, gather all its "
+        "light into their spherical Voronoi cells, and write lights.json, overlay.png and "
+        "lights.png to the output directory.",
+    )
+    p.add_argument("panorama", type=Path, help="panorama file (.exr, .hdr, .png, .jpg)")
+    p.add_argument("-k", type=int, default=64, help="number of lights (default 64)")
+    p.add_argument("--method", choices=SAMPLERS, default="tmed", help="sampler (default tmed)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument(
+        "--exact",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="return exactly K samples (default on)",
+    )
+    p.add_argument(
+        "--paper", action="store_true", help="diffuse plain pixel luminance, as the paper"
+    )
+    p.add_argument("--modulation", type=Path, help="image multiplying the sampling density")
+    p.add_argument("--yaw", type=float, default=0.0, help="rotate the environment, degrees CCW")
+    p.add_argument("--exposure", type=float, default=1.0, help="radiance scale (default 1)")
+    p.add_argument("--resample", action="store_true", help="resize a panorama that is not 2:1")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output directory")
+    p.set_defaults(handler=_run_sample)
+
+
+def _run_sample(args: argparse.Namespace) -> int:
+    from processing.environment import LightingControls, read_modulation_map
+    from processing.panorama import read_panorama
+    from render.lighting_outputs import write_lighting_outputs
+
+    panorama = read_panorama(args.panorama, resample=args.resample)
+    controls = LightingControls(
+        k=args.k,
+        method=args.method,
+        seed=args.seed,
+        exact=args.exact,
+        paper=args.paper,
+        modulation=None if args.modulation is None else read_modulation_map(args.modulation),
+        yaw_deg=args.yaw,
+        exposure=args.exposure,
+    )
+    lighting = write_lighting_outputs(panorama, controls, args.output)
+    lights = lighting.lights
+    print(
+        f"{lights.k} lights ({controls.method}) from {panorama.source} "
+        f"({panorama.width}x{panorama.height}); total light "
+        f"{lights.rgb.sum(axis=0).round(4).tolist()} (RGB radiance x sr) -> {args.output}/"
+    )
+    return 0
+
+
+def _add_demo(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = commands.add_parser(
+        "demo",
+        help="run the demonstration pipeline and write its pictures",
+        description="Run the demonstration on the bundled panorama and write pictures and a "
+        "report to the output directory.",
+    )
+    p.add_argument("-o", "--output", type=Path, default=Path("demo-out"), help="output directory")
+    p.set_defaults(handler=_run_demo)
+
+
+def _run_demo(args: argparse.Namespace) -> int:
+    from rig.demo import run_demo
+
+    report = run_demo(args.output)
+    print(f"demo written to {args.output}/ (see {report})")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``rig`` argument parser with every sub-command."""
+    parser = argparse.ArgumentParser(
+        prog="rig",
+        description="Reflectance-field capture rig and controllable image-based relighting.",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_sample(commands)
+    _add_demo(commands)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``rig`` console script; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        status: int = args.handler(args)
+    except RigError as error:
+        print(f"rig {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"rig {args.command}: interrupted", file=sys.stderr)
+        return 130
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""The simulated rig, synthetic scenes and the ground-truth renderer."""

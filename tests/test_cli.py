@@ -1,0 +1,64 @@
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from rig.cli import main
+
+
+@pytest.mark.parametrize("name", ["courtyard.exr", "studio.exr"])
+def test_sample_writes_lights_and_pictures(tmp_path: Path, courtyard_path: Path, name: str) -> None:
+    panorama = courtyard_path.parent / name
+    assert main(["sample", str(panorama), "-k", "32", "-o", str(tmp_path)]) == 0
+    doc = json.loads((tmp_path / "lights.json").read_text())
+    assert doc["k"] == 32 and doc["method"] == "tmed"
+    assert doc["panorama"] == {"path": str(panorama), "width": 1024, "height": 512}
+    assert np.array(doc["directions"]).shape == (32, 3)
+    assert np.array(doc["rgb"]).shape == (32, 3)
+    assert sum(doc["solid_angle_sr"]) == pytest.approx(4 * np.pi)
+    for picture in ("overlay.png", "lights.png"):
+        image = cv2.imread(str(tmp_path / picture))
+        assert image is not None and image.shape == (512, 1024, 3)
+
+
+def test_sample_controls(tmp_path: Path, courtyard_path: Path) -> None:
+    modulation = tmp_path / "mask.png"
+    mask = np.full((10, 20), 255, dtype=np.uint8)
+    mask[5:] = 0  # no samples below the horizon
+    cv2.imwrite(str(modulation), mask)
+    args = [
+        "sample",
+        str(courtyard_path),
+        "-k",
+        "16",
+        "--method",
+        "median-cut",
+        "--seed",
+        "3",
+        "--modulation",
+        str(modulation),
+        "--yaw",
+        "30",
+        "--exposure",
+        "2",
+        "-o",
+        str(tmp_path / "o"),
+    ]
+    assert main(args) == 0
+    doc = json.loads((tmp_path / "o" / "lights.json").read_text())
+    assert np.all(np.array(doc["directions"])[:, 2] > 0)
+    assert doc["controls"]["yaw_deg"] == 30 and doc["controls"]["exposure"] == 2
+
+
+def test_errors_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "black.exr"
+    from processing.panorama import write_panorama
+
+    write_panorama(bad, np.zeros((8, 16, 3), dtype=np.float32))
+    assert main(["sample", str(bad), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "no light" in err
