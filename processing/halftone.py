@@ -50,12 +50,10 @@ from rig.errors import InputError
 __all__ = ["DIFFUSION_METHODS", "DiffusionMethod", "error_diffuse", "halftone"]
 
 DiffusionMethod = Literal["tmed", "ostromoukhov", "floyd-steinberg"]
-DIFFUSION_METHODS: tuple[str, ...] = get_args(DiffusionMethod)
+DIFFUSION_METHODS: tuple[DiffusionMethod, ...] = get_args(DiffusionMethod)
 
 #: Fixed-point bits below one grey level used when diffusing sampling densities.
 DENSITY_FRACTION_BITS = 16
-
-_EXACT_FLOAT = 2**53  # integers below this convert to float64 exactly
 
 _FOLDED = np.minimum(np.arange(256), 255 - np.arange(256))  # input level -> table row
 
@@ -154,11 +152,7 @@ def halftone(
 
 @numba.njit(cache=True, inline="always")
 def _trunc_div(a: int, b: int) -> int:
-    # C integer division (toward zero), as the reference code does. Below 2**53 the float
-    # quotient truncates to the same integer (b <= 2e6, so a true quotient just under an
-    # integer n stays at least 1/b below it, far more than float rounding), and is much faster.
-    if -_EXACT_FLOAT < a < _EXACT_FLOAT:
-        return np.int64(a / b)
+    # C integer division (toward zero), as the reference code does.
     q = abs(a) // b
     return q if a >= 0 else -q
 
@@ -187,7 +181,7 @@ def _diffuse(
         last_row = i == height - 1
         for step in range(width):
             j = start + forward * step
-            given = np.int64(density[i, j] * scale + 0.5)
+            given = int(density[i, j] * scale + 0.5)
             value = given + current[j]
             level = min(given >> fraction_bits, 255)
             strength = modulation[level]

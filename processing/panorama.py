@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -109,10 +109,10 @@ def panorama_from_array(
                 f"{source}: negative radiance {lowest:.4g} at row {row}, col {col}; "
                 "light cannot be negative"
             )
-        image = np.maximum(image, 0.0)
+        image = np.maximum(image, np.float32(0.0))
     if not image.any():
         raise PanoramaError(f"{source}: the panorama holds no light (every pixel is zero)")
-    return Panorama(rgb=image, source=source)
+    return Panorama(rgb=np.asarray(image, dtype=np.float32), source=source)
 
 
 def read_panorama(
@@ -197,7 +197,7 @@ def _read_with_opencv(file: Path, transfer: Transfer | None) -> NDArray[np.float
     elif image.dtype == np.uint16:
         values = image.astype(np.float32) / 65535.0
     elif image.dtype == np.float32:
-        return image  # Radiance HDR: already linear
+        return np.asarray(image, dtype=np.float32)  # Radiance HDR: already linear
     else:
         raise PanoramaError(f"{file}: unsupported pixel type {image.dtype}")
     if (transfer or "srgb") == "srgb":
@@ -227,12 +227,11 @@ def write_panorama(
             _imwrite(temporary, image[:, :, ::-1])
         elif suffix == ".png":
             scale = 255.0 if bits == 8 else 65535.0
-            dtype = np.uint8 if bits == 8 else np.uint16
-            encoded = np.round(linear_to_srgb(image) * scale).astype(dtype)
-            _imwrite(temporary, encoded[:, :, ::-1])
+            encoded = np.round(linear_to_srgb(image) * scale)
+            _imwrite(temporary, encoded.astype(np.uint8 if bits == 8 else np.uint16)[:, :, ::-1])
 
 
-def _imwrite(path: Path, bgr: NDArray[np.generic]) -> None:
+def _imwrite(path: Path, bgr: NDArray[Any]) -> None:
     if not cv2.imwrite(str(path), bgr):
         raise PanoramaError(f"{path}: OpenCV could not write the image")
 

@@ -38,7 +38,8 @@ from processing.halftone import DIFFUSION_METHODS, error_diffuse
 from processing.median_cut import median_cut_sample
 from rig.directions import (
     direction_from_angles,
-    panorama_directions,
+    panorama_azimuths,
+    panorama_inclinations,
     panorama_pixel_points,
     panorama_row_solid_angles,
 )
@@ -56,7 +57,7 @@ __all__ = [
 ]
 
 SamplerName = Literal["tmed", "ostromoukhov", "floyd-steinberg", "uniform", "cdf", "median-cut"]
-SAMPLERS: tuple[str, ...] = get_args(SamplerName)
+SAMPLERS: tuple[SamplerName, ...] = get_args(SamplerName)
 
 #: Error-diffusion grid cells per wanted sample: the mean cell holds half a dot (mid-grey).
 CELLS_PER_SAMPLE = 2.0
@@ -238,12 +239,14 @@ def _diffusion_samples(
         fired = settle_count(fired, margin, grid > 0, k)
     elif not fired.any():
         raise InputError(f"{method} error diffusion placed no sample for k = {k}; use exact mode")
-    directions = panorama_directions(*density.shape)
+    inclinations = panorama_inclinations(density.shape[0])
+    azimuths = panorama_azimuths(density.shape[1])
     samples = []
     for r, c in zip(*np.nonzero(fired), strict=True):
         rows = slice(row_edges[r], row_edges[r + 1])
         cols = slice(col_edges[c], col_edges[c + 1])
-        samples.append(_cell_sample(density[rows, cols], directions[rows, cols]))
+        cell = direction_from_angles(azimuths[None, cols], inclinations[rows, None])
+        samples.append(_cell_sample(density[rows, cols], cell))
     return np.array(samples, dtype=np.float64)
 
 

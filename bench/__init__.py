@@ -1,0 +1,1 @@
+"""Benchmarks: programs that measure and print figures, saved as JSON and charts."""
