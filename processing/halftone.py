@@ -55,6 +55,8 @@ DIFFUSION_METHODS: tuple[DiffusionMethod, ...] = get_args(DiffusionMethod)
 #: Fixed-point bits below one grey level used when diffusing sampling densities.
 DENSITY_FRACTION_BITS = 16
 
+_FLOAT_SAFE = 2**52  # see _trunc_div
+
 _FOLDED = np.minimum(np.arange(256), 255 - np.arange(256))  # input level -> table row
 
 
@@ -152,7 +154,12 @@ def halftone(
 
 @numba.njit(cache=True, inline="always")
 def _trunc_div(a: int, b: int) -> int:
-    # C integer division (toward zero), as the reference code does.
+    # C integer division (toward zero), as the reference code does. For |a| < 2**52 and
+    # 0 < b <= 2**21 (table sums are below 2e6) a and b are exact doubles, and a quotient that is
+    # not an integer stays at least 1/b below the next integer, more than half an ulp there, so
+    # the truncated float quotient is the integer one; it is several times faster.
+    if -_FLOAT_SAFE < a < _FLOAT_SAFE:
+        return int(a / b)
     q = abs(a) // b
     return q if a >= 0 else -q
 

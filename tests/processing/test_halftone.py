@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from processing import halftone_tables as tables
-from processing.halftone import DIFFUSION_METHODS, error_diffuse, halftone
+from processing.halftone import DIFFUSION_METHODS, _trunc_div, error_diffuse, halftone
 from rig.errors import InputError
 
 
@@ -59,3 +59,15 @@ def test_bad_input_is_refused() -> None:
         error_diffuse(np.ones((4, 8)), method="bayer")
     with pytest.raises(InputError, match=r"0\.\.255"):
         halftone(np.full((4, 8), 300))
+
+
+@given(st.integers(-(2**62), 2**62), st.integers(1, 2**21))
+def test_error_shares_truncate_like_c(a: int, b: int) -> None:
+    expected = abs(a) // b * (1 if a >= 0 else -1)
+    assert _trunc_div(a, b) == expected
+
+
+@pytest.mark.parametrize("a", [2**52 - 1, -(2**52) + 1, 2**52 - 2, 9 * 2**49 + 7])
+@pytest.mark.parametrize("b", [1, 3, 1799499, 2**21])
+def test_error_shares_near_the_float_limit(a: int, b: int) -> None:
+    assert _trunc_div(a, b) == abs(a) // b * (1 if a >= 0 else -1)
