@@ -32,6 +32,7 @@ from rig.demo import bundled_panorama_path
 from rig.directions import panorama_directions, panorama_solid_angles
 
 KS = (8, 16, 32, 64, 128, 256, 512, 1024)
+SHARED_STUDIO = Path(__file__).resolve().parents[2] / "shared" / "data" / "panoramas" / "studio.exr"
 
 
 def _median_seconds(run: Callable[[], object], repeats: int) -> float:
@@ -133,6 +134,59 @@ def bench_environment(rgb: NDArray[np.float32], repeats: int) -> dict[str, Any]:
     return {"size": f"{panorama.width}x{panorama.height}", "k": 64, "ms": seconds * 1e3}
 
 
+def _lobe_responses(
+    normals: NDArray[np.float64],
+    directions: NDArray[np.float64],
+    light: NDArray[np.float64],
+    exponent: int,
+) -> NDArray[np.float64]:
+    """Sum over lights of light x max(0, n . w)^exponent for each normal; chunked over lights."""
+    total = np.zeros(normals.shape[0])
+    for start in range(0, directions.shape[0], 65536):
+        cosine = np.maximum(normals @ directions[start : start + 65536].T, 0.0)
+        total += (cosine**exponent) @ light[start : start + 65536]
+    return total
+
+
+def bench_accuracy(panoramas: list[Path]) -> list[dict[str, Any]]:
+    """How well K disassembled lights reproduce a panorama's lighting, per sampler.
+
+    Error = relative RMSE, over 500 normals spread on the sphere, of the luminance response to
+    a cosine lobe (diffuse) and a Phong lobe of exponent 20 (glossy), lights against every pixel.
+    """
+    i = np.arange(500) + 0.5
+    normals = np.stack(
+        [
+            np.sqrt(1 - (1 - 2 * i / 500) ** 2) * np.cos(np.pi * (3 - np.sqrt(5)) * i),
+            np.sqrt(1 - (1 - 2 * i / 500) ** 2) * np.sin(np.pi * (3 - np.sqrt(5)) * i),
+            1 - 2 * i / 500,
+        ],
+        axis=1,
+    )
+    configurations: list[tuple[str, dict[str, Any]]] = [(m, {"method": m}) for m in SAMPLERS]
+    configurations.append(("tmed paper", {"paper": True}))
+    configurations += [(f"tmed cells/sample={c:g}", {"cells_per_sample": c}) for c in (1, 4, 8)]
+    rows = []
+    for path in panoramas:
+        rgb = read_panorama(path).rgb
+        height, width = rgb.shape[:2]
+        pixels = panorama_directions(height, width).reshape(-1, 3)
+        energy = (luminance(rgb) * panorama_solid_angles(height, width)).ravel().astype(np.float64)
+        truth = {p: _lobe_responses(normals, pixels, energy, p) for p in (1, 20)}
+        for k in (16, 64, 256):
+            for name, options in configurations:
+                samples = sample_environment(rgb, k, **options)
+                lights = disassemble_lights(rgb, samples.directions)
+                light = luminance(lights.rgb.astype(np.float32)).astype(np.float64)
+                row: dict[str, Any] = {"panorama": path.name, "k": k, "configuration": name}
+                for exponent, label in ((1, "diffuse"), (20, "phong20")):
+                    estimate = _lobe_responses(normals, lights.directions, light, exponent)
+                    error = np.sqrt(np.mean((estimate - truth[exponent]) ** 2))
+                    row[f"{label}_rel_rmse"] = float(error / np.sqrt(np.mean(truth[exponent] ** 2)))
+                rows.append(row)
+    return rows
+
+
 def _chart(results: dict[str, Any], path: Path) -> None:
     import matplotlib
 
@@ -161,7 +215,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("-o", "--output", type=Path, default=Path("bench-out"))
     parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--panorama", type=Path, default=bundled_panorama_path())
+    parser.add_argument(
+        "--accuracy-panoramas",
+        type=Path,
+        nargs="*",
+        default=[bundled_panorama_path(), SHARED_STUDIO],
+        help="panoramas for the accuracy table (missing files are skipped with a note)",
+    )
     args = parser.parse_args(argv)
+    accuracy_panoramas = [p for p in args.accuracy_panoramas if p.is_file()]
+    for missing in set(args.accuracy_panoramas) - set(accuracy_panoramas):
+        print(f"note: {missing} not found; left out of the accuracy table")
     rgb = read_panorama(args.panorama).rgb
     results: dict[str, Any] = {
         "machine": {"cpu_count": __import__("os").cpu_count(), "python": platform.python_version()},
@@ -170,6 +234,7 @@ def main(argv: list[str] | None = None) -> int:
         "sampling": bench_sampling(rgb, args.repeats),
         "disassembling": bench_disassembling(rgb, args.repeats),
         "environment": bench_environment(rgb, args.repeats),
+        "accuracy": bench_accuracy(accuracy_panoramas),
     }
     print("error diffusion, 2048x1024 grey image (raw kernel)")
     for r in results["diffusion"]:
@@ -189,6 +254,12 @@ def main(argv: list[str] | None = None) -> int:
         )
     env = results["environment"]
     print(f"new lighting (yaw + TMED + disassemble), {env['size']}, K=64: {env['ms']:.1f} ms")
+    print("accuracy of K lights against every pixel (relative RMSE, diffuse / phong-20 lobes)")
+    for r in results["accuracy"]:
+        print(
+            f"  {r['panorama']:14s} K={r['k']:4d} {r['configuration']:24s}"
+            f" {r['diffuse_rel_rmse']:.4f} / {r['phong20_rel_rmse']:.4f}"
+        )
     args.output.mkdir(parents=True, exist_ok=True)
     (args.output / "sampling.json").write_text(json.dumps(results, indent=2) + "\n")
     _chart(results, args.output / "sampling.png")

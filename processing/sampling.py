@@ -151,6 +151,7 @@ def sample_environment(
     exact: bool | None = None,
     paper: bool = False,
     modulation: NDArray[np.floating] | None = None,
+    cells_per_sample: float = CELLS_PER_SAMPLE,
 ) -> SampleSet:
     """Choose about (or, with ``exact``, exactly) ``k`` light directions from a panorama.
 
@@ -170,6 +171,8 @@ def sample_environment(
         Sample plain pixel luminance, without the solid-angle weight.
     modulation : ndarray, optional
         User map multiplying the density; zero forbids samples.
+    cells_per_sample : float
+        Error-diffusion grid cells per wanted sample (see :func:`diffusion_grid`).
 
     Returns
     -------
@@ -184,7 +187,9 @@ def sample_environment(
         )
     density = sampling_density(rgb, k, paper=paper, modulation=modulation)
     if method in DIFFUSION_METHODS:
-        directions = _diffusion_samples(density, k, method, seed, exact is not False)
+        directions = _diffusion_samples(
+            density, k, method, seed, exact is not False, cells_per_sample
+        )
     elif method == "uniform":
         directions = (
             _fibonacci_sphere(k, seed) if modulation is None else _cdf_samples(density, k, seed)
@@ -197,14 +202,14 @@ def sample_environment(
 
 
 def diffusion_grid(
-    density: NDArray[np.float64], k: int
+    density: NDArray[np.float64], k: int, cells_per_sample: float = CELLS_PER_SAMPLE
 ) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp]]:
     """Sum a density into the equirectangular grid that error diffusion runs on.
 
     Error diffusion places dots well only where the density is a grey level: at 10^-4 dots per
     pixel (K = 64 over a 1024 x 512 panorama) the error takes thousands of rows to reach the
     threshold and no dot ever appears. So the density is summed into an h x 2h grid of about
-    ``CELLS_PER_SAMPLE * k`` cells, which puts the mean cell at mid-grey (the tones Zhou & Fang's
+    ``cells_per_sample * k`` cells (default 2: the mean cell at mid-grey, the tones Zhou & Fang's
     threshold modulation was designed for); the grid is refined while it has fewer lit cells
     than that.
 
@@ -214,22 +219,29 @@ def diffusion_grid(
     row_edges, col_edges : ndarray of int, shape (h + 1,), (2h + 1,), pixel bounds of the cells
     """
     height, width = density.shape
-    h = min(height, max(1, round(float(np.sqrt(k * CELLS_PER_SAMPLE / 2.0)))))
+    if not cells_per_sample > 0:
+        raise InputError(f"cells_per_sample must be positive, got {cells_per_sample}")
+    h = min(height, max(1, round(float(np.sqrt(k * cells_per_sample / 2.0)))))
     while True:
         row_edges = (np.arange(h + 1) * height) // h
         col_edges = (np.arange(2 * h + 1) * width) // (2 * h)
         grid = np.add.reduceat(
             np.add.reduceat(density, row_edges[:-1], axis=0), col_edges[:-1], axis=1
         )
-        if h == height or np.count_nonzero(grid) >= CELLS_PER_SAMPLE * k:
+        if h == height or np.count_nonzero(grid) >= cells_per_sample * k:
             return grid, row_edges, col_edges
         h = min(height, 2 * h)
 
 
 def _diffusion_samples(
-    density: NDArray[np.float64], k: int, method: str, seed: int, exact: bool
+    density: NDArray[np.float64],
+    k: int,
+    method: str,
+    seed: int,
+    exact: bool,
+    cells_per_sample: float,
 ) -> NDArray[np.float64]:
-    grid, row_edges, col_edges = diffusion_grid(density, k)
+    grid, row_edges, col_edges = diffusion_grid(density, k, cells_per_sample)
     fired, margin = error_diffuse(grid, method=method, seed=seed)
     count = int(fired.sum())
     if exact and count != k and count > 0:
