@@ -113,8 +113,13 @@ def error_diffuse(
         raise InputError("density must be finite and non-negative")
     if not 0 <= fraction_bits <= 20:
         raise InputError(f"fraction_bits must be in 0..20, got {fraction_bits}")
-    if float(d.max()) * 255.0 * 2.0**fraction_bits > 2.0**52:
-        raise InputError("density too large for exact integer error diffusion (max dots per pixel)")
+    # A working value never exceeds all the mass plus one pixel's input, and value x weight
+    # (weights < 2**21) must fit in int64.
+    if (float(d.sum()) + float(d.max())) * 255.0 * 2.0**fraction_bits >= 2.0**41:
+        raise InputError(
+            f"density too large for exact integer error diffusion ({d.sum():.4g} dots in all); "
+            "lower it or use fewer fraction bits"
+        )
     weights, modulation = _method_tables(method)
     # TMED's unmodulated threshold is 127 (strict >); the fixed-threshold methods split at
     # 127.5, which is 127 again in whole levels and exactly 127.5 in fixed point.

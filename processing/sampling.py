@@ -12,7 +12,8 @@ Samplers (all return unit directions, rig frame):
 ``tmed``                  error diffusion with threshold modulation, Zhou & Fang 2003 (default)
 ``ostromoukhov``          variable-coefficient error diffusion, Ostromoukhov 2001
 ``floyd-steinberg``       classic error diffusion, Floyd & Steinberg 1976
-``uniform``               a Fibonacci lattice, randomly rotated: uniform on the sphere
+``uniform``               a Fibonacci lattice, randomly rotated: uniform on the sphere (with a
+                          modulation map: inverse-CDF sampling of modulation x solid angle)
 ``cdf``                   inverse-CDF (marginal row, conditional column) sampling of the density
 ``median-cut``            Debevec 2005 median cut of the density
 ========================  ========================================================================
@@ -185,7 +186,9 @@ def sample_environment(
         raise InputError(
             f"k must be between 1 and the number of pixels ({height * width}), got {k}"
         )
-    density = sampling_density(rgb, k, paper=paper, modulation=modulation)
+    # Uniform sampling ignores the light; only solid angle and the modulation shape it.
+    light = np.ones_like(rgb[:, :, :3]) if method == "uniform" else rgb
+    density = sampling_density(light, k, paper=paper, modulation=modulation)
     if method in DIFFUSION_METHODS:
         directions = _diffusion_samples(
             density, k, method, seed, exact is not False, cells_per_sample

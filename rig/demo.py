@@ -13,6 +13,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from rig.atomic import atomic_path
+
 __all__ = ["DEMO_KS", "bundled_panorama_path", "run_demo"]
 
 DEMO_KS = (8, 64, 256)
@@ -59,5 +61,6 @@ def run_demo(directory: str | Path) -> Path:
         )
     lines += ["", "Every run gathers the same total light: disassembling conserves energy.", ""]
     report = out / "report.md"
-    report.write_text("\n".join(lines), encoding="utf-8")
+    with atomic_path(report) as temporary:
+        temporary.write_text("\n".join(lines), encoding="utf-8")
     return report

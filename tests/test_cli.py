@@ -62,3 +62,13 @@ def test_errors_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert main(["sample", str(bad), "-o", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert str(bad) in err and "no light" in err
+
+
+def test_demo_writes_pictures_and_report(tmp_path: Path) -> None:
+    assert main(["demo", "-o", str(tmp_path)]) == 0
+    report = (tmp_path / "report.md").read_text()
+    runs = sorted(p.name for p in (tmp_path / "sampling").iterdir())
+    assert "tmed-k64" in runs and "paper-tmed-k64" in runs and len(runs) == 10
+    for run in runs:
+        assert run in report
+        assert (tmp_path / "sampling" / run / "overlay.png").stat().st_size > 0

@@ -39,7 +39,7 @@ def test_a_sun_receives_a_sample(method: str) -> None:
     assert angle_between(s.directions, sun).min() <= 1.5 * pixel
 
 
-@pytest.mark.parametrize("method", [m for m in SAMPLERS if m != "uniform"])
+@pytest.mark.parametrize("method", SAMPLERS)
 def test_zero_modulation_forbids_samples(method: str) -> None:
     modulation = np.ones((8, 16))
     modulation[:, :8] = 0.0  # left half of the panorama
@@ -76,3 +76,11 @@ def test_bad_arguments() -> None:
         sample_environment(np.zeros((8, 16, 3), dtype=np.float32), 4)
     with pytest.raises(InputError, match="density is zero"):
         sample_environment(_sky(), 4, modulation=np.zeros((4, 8)))
+
+
+def test_uniform_with_modulation_ignores_the_light() -> None:
+    sky = _sky() * 0.01
+    sky[:32] *= 1e4  # upper hemisphere far brighter
+    modulation = np.ones((4, 8))
+    d = sample_environment(sky, 200, method="uniform", modulation=modulation).directions
+    assert np.mean(d[:, 2] > 0) == pytest.approx(0.5, abs=0.1)
