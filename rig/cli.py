@@ -93,6 +93,41 @@ def _run_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = commands.add_parser("sim", help="the simulated world: scenes (more to come)")
+    sim_commands = p.add_subparsers(dest="sim_command", required=True, metavar="SIM_COMMAND")
+    scenes = sim_commands.add_parser(
+        "scenes",
+        help="list the synthetic scenes with their geometry and materials",
+        description="List the synthetic scenes with every parameter needed to rebuild them in "
+        "another renderer.",
+    )
+    scenes.add_argument("--json", action="store_true", help="print a JSON list")
+    scenes.set_defaults(handler=_run_sim_scenes)
+
+
+def _run_sim_scenes(args: argparse.Namespace) -> int:
+    import json
+
+    from sim.scenes import SCENES
+
+    described = [spec.to_json() for spec in SCENES.values()]
+    if args.json:
+        print(json.dumps(described, indent=2))
+        return 0
+    for scene in described:
+        material = scene["material"]
+        geometry = ", ".join(f"{k}={v}" for k, v in scene["geometry"].items())
+        print(f"{scene['name']}: {scene['description']}")
+        print(f"  geometry: {geometry}")
+        print(
+            f"  material: rho_d={material['rho_d']} f0={material['f0']} alpha={material['alpha']}"
+        )
+        if "texture" in material:
+            print(f"  texture:  {material['texture']}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``rig`` argument parser with every sub-command."""
     parser = argparse.ArgumentParser(
@@ -102,6 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_sample(commands)
     _add_demo(commands)
+    _add_sim(commands)
     return parser
 
 

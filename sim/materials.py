@@ -1,0 +1,108 @@
+"""The simulator's reflectance model, defined exactly so other renderers can reproduce it.
+
+    f(wi, wo) = rho_d / pi + F0 D(h) G(wi, wo) / (4 cos(theta_i) cos(theta_o))
+
+- h = normalize(wi + wo), the half vector; cos(theta) are dot products with the normal n.
+- D: the GGX (Trowbridge-Reitz) distribution of roughness alpha,
+  D(h) = alpha^2 / (pi ((n.h)^2 (alpha^2 - 1) + 1)^2).
+- G: the separable Smith masking-shadowing for GGX, G = G1(wi) G1(wo),
+  G1(v) = 2 (n.v) / ((n.v) + sqrt(alpha^2 + (1 - alpha^2) (n.v)^2)).
+- F0: a constant RGB reflectance (no angular Fresnel term); rho_d: RGB diffuse albedo.
+  Lambertian is F0 = 0.
+
+Zero when either direction is below the surface. A ``blendbsdf`` averages its two BSDFs, so in
+Mitsuba 3 the sum is a blend of weight 0.5 of ``diffuse`` (reflectance 2 rho_d) and
+``roughconductor`` (``distribution: ggx``, ``alpha``, ``material: none``,
+``specular_reflectance: 2 F0``), which evaluates the same D and separable Smith G; the Mitsuba
+comparison of the simulator issue is what confirms this mapping.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from rig.errors import InputError
+
+__all__ = ["Material", "brdf", "ggx_distribution", "smith_g1"]
+
+
+@dataclass(frozen=True)
+class Material:
+    """Parameters of the reflectance model (see the module docstring).
+
+    Attributes
+    ----------
+    rho_d : (r, g, b), diffuse albedo in [0, 1]
+    f0 : (r, g, b), specular reflectance in [0, 1]
+    alpha : GGX roughness in (0, 1]
+    """
+
+    rho_d: tuple[float, float, float]
+    f0: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    alpha: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("rho_d", "f0"):
+            value = getattr(self, name)
+            if len(value) != 3 or not all(0.0 <= float(c) <= 1.0 for c in value):
+                raise InputError(f"material {name} must be three values in [0, 1], got {value}")
+        if not 0.0 < self.alpha <= 1.0:
+            raise InputError(f"material alpha must be in (0, 1], got {self.alpha}")
+
+    def to_json(self) -> dict[str, object]:
+        return {"rho_d": list(self.rho_d), "f0": list(self.f0), "alpha": self.alpha}
+
+
+def ggx_distribution(cos_h: ArrayLike, alpha: ArrayLike) -> NDArray[np.float64]:
+    """GGX normal distribution D for cos(normal, half vector); broadcast; 1/sr."""
+    c = np.asarray(cos_h, dtype=np.float64)
+    a2 = np.asarray(alpha, dtype=np.float64) ** 2
+    denominator = np.pi * (c * c * (a2 - 1.0) + 1.0) ** 2
+    return np.where(c > 0, a2 / denominator, 0.0)
+
+
+def smith_g1(cos_v: ArrayLike, alpha: ArrayLike) -> NDArray[np.float64]:
+    """Smith masking G1 for GGX of a direction with cos(normal, v) = ``cos_v``; broadcast."""
+    c = np.asarray(cos_v, dtype=np.float64)
+    a2 = np.asarray(alpha, dtype=np.float64) ** 2
+    root = np.sqrt(a2 + (1.0 - a2) * c * c)
+    return np.where(c > 0, 2.0 * c / np.maximum(c + root, 1e-300), 0.0)
+
+
+def brdf(
+    normals: ArrayLike,
+    wi: ArrayLike,
+    wo: ArrayLike,
+    rho_d: ArrayLike,
+    f0: ArrayLike,
+    alpha: ArrayLike,
+) -> NDArray[np.float64]:
+    """Evaluate f(wi, wo) per RGB channel, 1/sr.
+
+    Parameters
+    ----------
+    normals, wi, wo : array_like, shape (..., 3), unit vectors (light and view point away)
+    rho_d, f0 : array_like, shape (..., 3)
+    alpha : array_like, shape (...)
+
+    Returns
+    -------
+    ndarray, shape (..., 3), float64; zero where wi or wo is below the surface
+    """
+    n = np.asarray(normals, dtype=np.float64)
+    i = np.asarray(wi, dtype=np.float64)
+    o = np.asarray(wo, dtype=np.float64)
+    cos_i = np.sum(n * i, axis=-1)
+    cos_o = np.sum(n * o, axis=-1)
+    half = i + o
+    length = np.linalg.norm(half, axis=-1)
+    cos_h = np.sum(n * half, axis=-1) / np.maximum(length, 1e-300)
+    a = np.asarray(alpha, dtype=np.float64)
+    lit = (cos_i > 0) & (cos_o > 0)
+    safe = np.where(lit, 4.0 * cos_i * cos_o, 1.0)
+    specular = ggx_distribution(cos_h, a) * smith_g1(cos_i, a) * smith_g1(cos_o, a) / safe
+    value = np.asarray(rho_d, dtype=np.float64) / np.pi + np.asarray(f0) * specular[..., None]
+    return np.where(lit[..., None], value, 0.0)
