@@ -62,5 +62,6 @@ def sample_mesh(
     return SurfaceSamples(
         points=samples.astype(np.float32),
         normals=normals.astype(np.float32),
+        spacing=float(np.sqrt(0.5 * doubled_area.sum() / points)),
         **uniform_material(points, material),
     )

@@ -34,6 +34,8 @@ class SurfaceSamples:
     points, normals : ndarray, shape (P, 3), float32 (normals unit, pointing outward)
     rho_d, f0 : ndarray, shape (P, 3), float32
     alpha : ndarray, shape (P,), float32
+    spacing : float
+        Mean distance between neighbouring points, sqrt(surface area / P): sizes splats.
     """
 
     points: NDArray[np.float32]
@@ -41,6 +43,7 @@ class SurfaceSamples:
     rho_d: NDArray[np.float32]
     f0: NDArray[np.float32]
     alpha: NDArray[np.float32]
+    spacing: float
 
     @property
     def count(self) -> int:
@@ -94,6 +97,7 @@ def _sphere(
         return SurfaceSamples(
             points=points.astype(np.float32),
             normals=normals.astype(np.float32),
+            spacing=float(np.sqrt(4.0 * np.pi * radius**2 / count)),
             **uniform_material(count, material),
         )
 
@@ -129,7 +133,10 @@ def _torus(count: int) -> SurfaceSamples:
     arrays = uniform_material(count, TORUS_MATERIAL)
     arrays["rho_d"] = rho_d
     return SurfaceSamples(
-        points=points.astype(np.float32), normals=normals.astype(np.float32), **arrays
+        points=points.astype(np.float32),
+        normals=normals.astype(np.float32),
+        spacing=float(np.sqrt(4.0 * np.pi**2 * TORUS_MAJOR * TORUS_MINOR / count)),
+        **arrays,
     )
 
 

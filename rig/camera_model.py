@@ -1,0 +1,99 @@
+"""The pinhole camera of the rig frame: pose from azimuth/inclination/distance, and projection.
+
+A camera sits at ``distance`` along the direction (azimuth, inclination) and looks at the
+origin. Image up is the projection of ``+z``; for views straight above or below, where that
+vanishes, it is the limit approached from the camera's azimuth (up points away from the azimuth
+direction when looking down). Images are not mirrored, as a photo: column index grows to the
+right, row index grows downward. Square pixels, principal point at the image centre; pixel
+(row i, col j) covers [i, i + 1) x [j, j + 1) in continuous image coordinates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from rig.directions import direction_from_angles_deg
+from rig.errors import InputError
+
+__all__ = ["PinholeCamera"]
+
+
+@dataclass(frozen=True)
+class PinholeCamera:
+    """A pinhole camera looking at the origin.
+
+    Attributes
+    ----------
+    azimuth_deg, inclination_deg : float, direction from the origin to the camera
+    distance : float, > 0, same length unit as the scene
+    fov_deg : float, horizontal field of view in (0, 180)
+    width, height : int, image size in pixels
+    """
+
+    azimuth_deg: float
+    inclination_deg: float
+    distance: float = 4.0
+    fov_deg: float = 40.0
+    width: int = 512
+    height: int = 512
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.distance) and self.distance > 0):
+            raise InputError(f"camera distance must be positive, got {self.distance}")
+        if not 0.0 < self.fov_deg < 180.0:
+            raise InputError(f"field of view must be in (0, 180) degrees, got {self.fov_deg}")
+        if self.width < 1 or self.height < 1:
+            raise InputError(f"image size must be positive, got {self.width}x{self.height}")
+        if not (np.isfinite(self.azimuth_deg) and 0.0 <= self.inclination_deg <= 180.0):
+            raise InputError(
+                f"camera direction must have inclination in [0, 180] degrees, got "
+                f"({self.azimuth_deg}, {self.inclination_deg})"
+            )
+
+    @property
+    def direction(self) -> NDArray[np.float64]:
+        """Unit vector from the origin toward the camera; shape (3,)."""
+        return direction_from_angles_deg(self.azimuth_deg, self.inclination_deg)
+
+    @property
+    def position(self) -> NDArray[np.float64]:
+        """Camera centre in the rig frame; shape (3,)."""
+        return self.distance * self.direction
+
+    @property
+    def focal_px(self) -> float:
+        """Focal length in pixels."""
+        return 0.5 * self.width / float(np.tan(np.deg2rad(self.fov_deg) / 2.0))
+
+    def axes(self) -> NDArray[np.float64]:
+        """Rows: the camera's right, up and forward unit vectors in the rig frame; (3, 3)."""
+        forward = -self.direction
+        up = np.array([0.0, 0.0, 1.0])
+        up = up - (up @ forward) * forward
+        if np.linalg.norm(up) < 1e-9:  # straight above or below: the limit along the azimuth
+            horizontal = direction_from_angles_deg(self.azimuth_deg, 90.0)
+            up = -horizontal if forward[2] < 0 else horizontal
+        up = up / np.linalg.norm(up)
+        right = np.cross(forward, up)
+        return np.stack([right, up, forward])
+
+    def project(
+        self, points: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Image coordinates and depth of points (N, 3).
+
+        Returns
+        -------
+        col, row : ndarray, shape (N,), continuous pixel coordinates (centre of pixel (i, j) at
+            (i + 0.5, j + 0.5))
+        depth : ndarray, shape (N,), distance along the viewing axis (> 0 in front)
+        """
+        relative = np.asarray(points, dtype=np.float64) - self.position
+        x, y, z = (relative @ self.axes().T).T
+        safe = np.where(z > 0, z, np.inf)
+        col = 0.5 * self.width + self.focal_px * x / safe
+        row = 0.5 * self.height - self.focal_px * y / safe
+        return col, row, z
