@@ -92,14 +92,16 @@ def brdf(
     -------
     ndarray, shape (..., 3), float64; zero where wi or wo is below the surface
     """
-    n = np.asarray(normals, dtype=np.float64)
-    i = np.asarray(wi, dtype=np.float64)
-    o = np.asarray(wo, dtype=np.float64)
-    cos_i = np.sum(n * i, axis=-1)
-    cos_o = np.sum(n * o, axis=-1)
+    n, i, o = np.broadcast_arrays(
+        np.asarray(normals, dtype=np.float64),
+        np.asarray(wi, dtype=np.float64),
+        np.asarray(wo, dtype=np.float64),
+    )
+    cos_i = np.einsum("...k,...k->...", n, i)
+    cos_o = np.einsum("...k,...k->...", n, o)
     half = i + o
-    length = np.linalg.norm(half, axis=-1)
-    cos_h = np.sum(n * half, axis=-1) / np.maximum(length, 1e-300)
+    length = np.sqrt(np.einsum("...k,...k->...", half, half))
+    cos_h = np.einsum("...k,...k->...", n, half) / np.maximum(length, 1e-300)
     a = np.asarray(alpha, dtype=np.float64)
     lit = (cos_i > 0) & (cos_o > 0)
     safe = np.where(lit, 4.0 * cos_i * cos_o, 1.0)

@@ -110,7 +110,8 @@ def light_visibility(samples: SurfaceSamples, light: Light) -> NDArray[np.bool_]
     """Which points the light reaches (facing it and not shadowed); shape (P,)."""
     points = samples.points.astype(np.float64)
     towards, _ = _light_geometry(samples, light)
-    facing = np.sum(samples.normals * towards, axis=1) > 0
+    cosine = np.einsum("pk,pk->p", samples.normals.astype(np.float64), towards)
+    facing = cosine > 0
     if isinstance(light, DirectionalLight):
         axis = towards[0]
         helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
@@ -147,8 +148,8 @@ def light_visibility(samples: SurfaceSamples, light: Light) -> NDArray[np.bool_]
     front = depth_at_points(cols, rows, zbuffer(cols, rows, depth, radius, height, width))
     # Slope-scaled bias: a neighbour's splat one spacing away on the same tilted surface lies
     # spacing x tan(theta) nearer the light.
-    cosine = np.clip(np.sum(samples.normals * towards, axis=1), 0.05, 1.0)
-    slope = np.sqrt(1.0 - cosine**2) / cosine
+    clipped = np.clip(cosine, 0.05, 1.0)
+    slope = np.sqrt(1.0 - clipped**2) / clipped
     return facing & (depth <= front + bias * (1.0 + slope))
 
 
@@ -158,9 +159,9 @@ def shade_points(
     """Radiance (P, 3) of every point toward ``viewpoint`` under ``light`` (direct light only)."""
     towards, irradiance = _light_geometry(samples, light)
     view = np.asarray(viewpoint, dtype=np.float64) - samples.points
-    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    view /= np.sqrt(np.einsum("pk,pk->p", view, view))[:, None]
     normals = samples.normals.astype(np.float64)
-    cosine = np.maximum(np.sum(normals * towards, axis=1), 0.0)
+    cosine = np.maximum(np.einsum("pk,pk->p", normals, towards), 0.0)
     f = brdf(normals, towards, view, samples.rho_d, samples.f0, samples.alpha)
     radiance = f * (cosine * irradiance)[:, None]
     if shadows:
@@ -181,7 +182,7 @@ def render_under_light(
         )
     radiance = shade_points(samples, camera.position, light, shadows=shadows)
     cols, rows, depth = camera.project(samples.points)
-    facing = np.sum(samples.normals * (camera.position - samples.points), axis=1) > 0
+    facing = np.einsum("pk,pk->p", samples.normals, camera.position - samples.points) > 0
     depth = np.where(facing, depth, np.inf)  # back faces never occlude or show
     radius = np.maximum(SPLAT_RADIUS * samples.spacing * camera.focal_px / depth, 0.75)
     buffer = zbuffer(cols, rows, depth, radius, camera.height, camera.width)
