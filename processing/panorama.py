@@ -31,6 +31,7 @@ __all__ = [
     "panorama_from_array",
     "read_image",
     "read_panorama",
+    "write_exr_rgba",
     "write_panorama",
 ]
 
@@ -220,15 +221,33 @@ def write_panorama(
         raise PanoramaError(f"{file}: cannot write {suffix!r}; use .exr, .hdr or .png")
     with atomic_path(file) as temporary:
         if suffix == ".exr":
-            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-            with OpenEXR.File(header, {"RGB": image}) as exr:
-                exr.write(str(temporary))
+            _write_exr(temporary, {"RGB": image})
         elif suffix in (".hdr", ".pic"):
             _imwrite(temporary, image[:, :, ::-1])
         elif suffix == ".png":
             scale = 255.0 if bits == 8 else 65535.0
             encoded = np.round(linear_to_srgb(image) * scale)
             _imwrite(temporary, encoded.astype(np.uint8 if bits == 8 else np.uint16)[:, :, ::-1])
+
+
+def write_exr_rgba(
+    path: str | os.PathLike[str], rgb: NDArray[np.floating], alpha: NDArray[np.floating]
+) -> None:
+    """Write linear RGB (H, W, 3) and alpha (H, W) as a float32 OpenEXR file, atomically."""
+    image = np.ascontiguousarray(np.asarray(rgb, dtype=np.float32)[:, :, :3])
+    coverage = np.ascontiguousarray(np.asarray(alpha, dtype=np.float32))
+    if coverage.shape != image.shape[:2]:
+        raise PanoramaError(
+            f"{path}: alpha {coverage.shape} does not match the image {image.shape}"
+        )
+    with atomic_path(path) as temporary:
+        _write_exr(temporary, {"RGB": image, "A": coverage})
+
+
+def _write_exr(path: Path, channels: dict[str, NDArray[np.float32]]) -> None:
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, channels) as exr:
+        exr.write(str(path))
 
 
 def _imwrite(path: Path, bgr: NDArray[Any]) -> None:

@@ -69,6 +69,7 @@ class SceneSpec:
     material: Material
     builder: Callable[[int], SurfaceSamples] = field(repr=False)
     texture: str | None = None
+    convex: bool = False  # no point shadows another: visibility is n . w > 0
 
     def to_json(self) -> dict[str, Any]:
         material: dict[str, Any] = dict(self.material.to_json())
@@ -152,6 +153,7 @@ SCENES: dict[str, SceneSpec] = {
             geometry={"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 1.0},
             material=DIFFUSE,
             builder=_sphere((0.0, 0.0, 0.0), 1.0, DIFFUSE),
+            convex=True,
         ),
         SceneSpec(
             name="glossy-sphere",
@@ -159,6 +161,7 @@ SCENES: dict[str, SceneSpec] = {
             geometry={"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 1.0},
             material=GLOSSY,
             builder=_sphere((0.0, 0.0, 0.0), 1.0, GLOSSY),
+            convex=True,
         ),
         SceneSpec(
             name="textured-torus",

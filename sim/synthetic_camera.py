@@ -29,6 +29,7 @@ __all__ = [
     "DirectionalLight",
     "PointLight",
     "SyntheticImage",
+    "image_of_points",
     "light_visibility",
     "render_under_light",
     "shade_points",
@@ -173,6 +174,13 @@ def render_under_light(
     samples: SurfaceSamples, camera: PinholeCamera, light: Light, *, shadows: bool = True
 ) -> SyntheticImage:
     """Render one image of ``samples`` seen by ``camera`` under ``light``."""
+    _check_camera(samples, camera)
+    return image_of_points(
+        samples, camera, shade_points(samples, camera.position, light, shadows=shadows)
+    )
+
+
+def _check_camera(samples: SurfaceSamples, camera: PinholeCamera) -> None:
     if samples.count < 1:
         raise InputError("the object has no points")
     if camera.distance <= _bounding_radius(samples):
@@ -180,7 +188,13 @@ def render_under_light(
             f"camera distance {camera.distance} is inside the object (bounding radius "
             f"{_bounding_radius(samples):.3g}); move the camera further out"
         )
-    radiance = shade_points(samples, camera.position, light, shadows=shadows)
+
+
+def image_of_points(
+    samples: SurfaceSamples, camera: PinholeCamera, radiance: NDArray[np.floating]
+) -> SyntheticImage:
+    """Splat points of known radiance (P, 3) into the camera's image, with visibility."""
+    _check_camera(samples, camera)
     cols, rows, depth = camera.project(samples.points)
     facing = np.einsum("pk,pk->p", samples.normals, camera.position - samples.points) > 0
     depth = np.where(facing, depth, np.inf)  # back faces never occlude or show
@@ -188,10 +202,11 @@ def render_under_light(
     buffer = zbuffer(cols, rows, depth, radius, camera.height, camera.width)
     tolerance = DEPTH_TOLERANCE * samples.spacing
     visible = facing & (depth <= depth_at_points(cols, rows, buffer) + tolerance)
-    image, weight = blend_splats(cols, rows, depth, radius, radiance, buffer, tolerance)
+    colours = np.asarray(radiance, dtype=np.float64)
+    image, weight = blend_splats(cols, rows, depth, radius, colours, buffer, tolerance)
     return SyntheticImage(
         rgb=image,
         coverage=weight > 0,
-        point_radiance=radiance.astype(np.float32),
+        point_radiance=colours.astype(np.float32),
         visible=visible,
     )
