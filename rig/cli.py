@@ -94,7 +94,7 @@ def _run_demo(args: argparse.Namespace) -> int:
 
 
 def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = commands.add_parser("sim", help="the simulated world: scenes (more to come)")
+    p = commands.add_parser("sim", help="the simulated world: scenes, ground truth, fields")
     sim_commands = p.add_subparsers(dest="sim_command", required=True, metavar="SIM_COMMAND")
     scenes = sim_commands.add_parser(
         "scenes",
@@ -126,6 +126,23 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     render.add_argument("-o", "--output", type=Path, required=True, help="output .exr")
     render.set_defaults(handler=_run_sim_render)
 
+    field = sim_commands.add_parser(
+        "field",
+        help="write a reflectance field store straight from the simulator",
+        description="Compute the radiance of every surface point under every light from every "
+        "camera (directional lights of unit irradiance, shadows included) and the cameras' "
+        "visibility masks, and write them as a Zarr field store.",
+    )
+    field.add_argument("--scene", required=True, help="scene name (see rig sim scenes)")
+    field.add_argument("--lights", type=int, required=True, help="number of light directions T")
+    field.add_argument("--cameras", type=int, required=True, help="number of cameras S")
+    field.add_argument("--layout", choices=("grid", "fibonacci"), default="grid")
+    field.add_argument("--points", type=int, default=100_000, help="surface points (default 100k)")
+    _add_camera_options(field)
+    field.add_argument("--dtype", choices=("float32", "float16"), default="float32")
+    field.add_argument("-o", "--output", type=Path, required=True, help="field store directory")
+    field.set_defaults(handler=_run_sim_field)
+
 
 def _angles(text: str) -> tuple[float, float]:
     try:
@@ -148,6 +165,34 @@ def _add_camera_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--distance", type=float, default=4.0, help="camera distance (default 4)")
     p.add_argument("--fov", type=float, default=40.0, help="horizontal field of view, degrees")
     p.add_argument("--size", type=_size, default=(512, 512), help="image WIDTHxHEIGHT (512x512)")
+
+
+def _run_sim_field(args: argparse.Namespace) -> int:
+    from sim.field import field_cameras, simulate_field
+
+    cameras = field_cameras(
+        args.cameras,
+        args.layout,
+        distance=args.distance,
+        fov_deg=args.fov,
+        width=args.size[0],
+        height=args.size[1],
+    )
+    simulate_field(
+        args.output,
+        args.scene,
+        lights=args.lights,
+        cameras=cameras,
+        points=args.points,
+        layout=args.layout,
+        dtype=args.dtype,
+        progress=True,
+    )
+    print(
+        f"{args.scene}: {args.cameras} cameras x {args.lights} lights x {args.points} points "
+        f"-> {args.output}"
+    )
+    return 0
 
 
 def _run_sim_render(args: argparse.Namespace) -> int:

@@ -30,6 +30,7 @@ __all__ = [
     "angles_from_direction",
     "direction_from_angles",
     "direction_from_angles_deg",
+    "hemisphere_layout",
     "normalize",
     "panorama_azimuths",
     "panorama_directions",
@@ -230,3 +231,40 @@ def rotate_panorama_yaw(image: NDArray[np.floating], yaw_deg: float) -> NDArray[
         return base
     following = np.roll(base, -1, axis=1)
     return ((1.0 - frac) * base + frac * following).astype(image.dtype, copy=False)
+
+
+def hemisphere_layout(count: int, layout: str = "grid") -> FloatArray:
+    """``count`` directions over the upper hemisphere (inclination below 90 degrees).
+
+    Parameters
+    ----------
+    count : int, >= 1
+    layout : {"grid", "fibonacci"}
+        ``grid``: rings of equal inclination step (centres at (i + 0.5) 90 / rings degrees), the
+        count shared among rings in proportion to sin(inclination) and spread evenly in azimuth
+        (rings = round(sqrt(count / 2))), as a gantry sweeps them; ``fibonacci``: the
+        near-uniform spherical Fibonacci lattice restricted to z > 0.
+
+    Returns
+    -------
+    ndarray, shape (count, 3), float64
+    """
+    if count < 1:
+        raise InputError(f"a layout needs at least one direction, got {count}")
+    i = np.arange(count, dtype=np.float64) + 0.5
+    if layout == "fibonacci":
+        return direction_from_angles(np.pi * (3.0 - np.sqrt(5.0)) * i, np.arccos(1.0 - i / count))
+    if layout != "grid":
+        raise InputError(f"unknown layout {layout!r}; use 'grid' or 'fibonacci'")
+    rings = max(1, round(float(np.sqrt(count / 2.0))))
+    inclination = (np.arange(rings) + 0.5) * (0.5 * np.pi / rings)
+    share = np.sin(inclination) / np.sin(inclination).sum() * count
+    per_ring = np.floor(share).astype(int)
+    # Hand out the remainder to the rings that lost the most to rounding.
+    for ring in np.argsort(per_ring - share)[: count - per_ring.sum()]:
+        per_ring[ring] += 1
+    azimuths = [
+        2.0 * np.pi * (np.arange(n) + 0.5 * (r % 2)) / n for r, n in enumerate(per_ring) if n
+    ]
+    inclinations = [np.full(n, inclination[r]) for r, n in enumerate(per_ring) if n]
+    return direction_from_angles(np.concatenate(azimuths), np.concatenate(inclinations))

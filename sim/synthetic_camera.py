@@ -29,6 +29,7 @@ __all__ = [
     "DirectionalLight",
     "PointLight",
     "SyntheticImage",
+    "camera_visibility",
     "image_of_points",
     "light_visibility",
     "render_under_light",
@@ -190,18 +191,32 @@ def _check_camera(samples: SurfaceSamples, camera: PinholeCamera) -> None:
         )
 
 
-def image_of_points(
-    samples: SurfaceSamples, camera: PinholeCamera, radiance: NDArray[np.floating]
-) -> SyntheticImage:
-    """Splat points of known radiance (P, 3) into the camera's image, with visibility."""
+def _camera_splats(
+    samples: SurfaceSamples, camera: PinholeCamera
+) -> tuple[NDArray[np.float64], ...]:
+    """Image coordinates, depth (inf for back faces), splat radius and z-buffer of the points."""
     _check_camera(samples, camera)
     cols, rows, depth = camera.project(samples.points)
     facing = np.einsum("pk,pk->p", samples.normals, camera.position - samples.points) > 0
     depth = np.where(facing, depth, np.inf)  # back faces never occlude or show
     radius = np.maximum(SPLAT_RADIUS * samples.spacing * camera.focal_px / depth, 0.75)
     buffer = zbuffer(cols, rows, depth, radius, camera.height, camera.width)
+    return cols, rows, depth, radius, buffer
+
+
+def camera_visibility(samples: SurfaceSamples, camera: PinholeCamera) -> NDArray[np.bool_]:
+    """Which points (P,) the camera sees: facing it and at the front of its z-buffer."""
+    cols, rows, depth, _, buffer = _camera_splats(samples, camera)
+    return depth <= depth_at_points(cols, rows, buffer) + DEPTH_TOLERANCE * samples.spacing
+
+
+def image_of_points(
+    samples: SurfaceSamples, camera: PinholeCamera, radiance: NDArray[np.floating]
+) -> SyntheticImage:
+    """Splat points of known radiance (P, 3) into the camera's image, with visibility."""
+    cols, rows, depth, radius, buffer = _camera_splats(samples, camera)
     tolerance = DEPTH_TOLERANCE * samples.spacing
-    visible = facing & (depth <= depth_at_points(cols, rows, buffer) + tolerance)
+    visible = depth <= depth_at_points(cols, rows, buffer) + tolerance
     colours = np.asarray(radiance, dtype=np.float64)
     image, weight = blend_splats(cols, rows, depth, radius, colours, buffer, tolerance)
     return SyntheticImage(
