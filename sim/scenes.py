@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -48,6 +49,11 @@ class SurfaceSamples:
     @property
     def count(self) -> int:
         return int(self.points.shape[0])
+
+    @cached_property
+    def bounding_radius(self) -> float:
+        """Largest distance of a point from the origin."""
+        return float(np.linalg.norm(self.points, axis=1).max())
 
 
 def uniform_material(count: int, material: Material) -> dict[str, NDArray[np.float32]]:

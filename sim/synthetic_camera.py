@@ -80,10 +80,6 @@ class SyntheticImage:
     visible: NDArray[np.bool_]
 
 
-def _bounding_radius(samples: SurfaceSamples) -> float:
-    return float(np.linalg.norm(samples.points, axis=1).max())
-
-
 def _light_geometry(
     samples: SurfaceSamples, light: Light
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -98,10 +94,10 @@ def _light_geometry(
             len(points), light.irradiance
         )
     position = np.asarray(light.position, dtype=np.float64)
-    if np.linalg.norm(position) <= _bounding_radius(samples) or not light.intensity >= 0:
+    if np.linalg.norm(position) <= samples.bounding_radius or not light.intensity >= 0:
         raise InputError(
             f"point light at {light.position} is inside the object (bounding radius "
-            f"{_bounding_radius(samples):.3g}) or has a negative intensity"
+            f"{samples.bounding_radius:.3g}) or has a negative intensity"
         )
     offset = position - points
     distance = np.linalg.norm(offset, axis=1)
@@ -120,7 +116,7 @@ def light_visibility(samples: SurfaceSamples, light: Light) -> NDArray[np.bool_]
         a = np.cross(axis, helper)
         a /= np.linalg.norm(a)
         b = np.cross(axis, a)
-        depth = -(points @ axis) + _bounding_radius(samples) + 1.0  # distance along the light
+        depth = -(points @ axis) + samples.bounding_radius + 1.0  # distance along the light
         scale = 1.0 / samples.spacing  # map cells per unit length
         u, w = points @ a, points @ b
         radius = np.full(len(points), SPLAT_RADIUS * 1.5)
@@ -184,10 +180,10 @@ def render_under_light(
 def _check_camera(samples: SurfaceSamples, camera: PinholeCamera) -> None:
     if samples.count < 1:
         raise InputError("the object has no points")
-    if camera.distance <= _bounding_radius(samples):
+    if camera.distance <= samples.bounding_radius:
         raise InputError(
             f"camera distance {camera.distance} is inside the object (bounding radius "
-            f"{_bounding_radius(samples):.3g}); move the camera further out"
+            f"{samples.bounding_radius:.3g}); move the camera further out"
         )
 
 
