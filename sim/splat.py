@@ -72,9 +72,12 @@ def blend_splats(
 
 @numba.njit(cache=True, inline="always")
 def _disk_bounds(
-    row: float, col: float, r: float, height: int, width: int
+    row: float, col: float, depth: float, r: float, height: int, width: int
 ) -> tuple[int, int, int, int]:
-    # Rows and columns whose pixel centres (index + 0.5) may lie within r of (row, col).
+    # Rows and columns whose pixel centres (index + 0.5) may lie within r of (row, col); an
+    # empty range for a point behind the camera or off any finite position.
+    if not (depth > 0.0 and math.isfinite(depth) and math.isfinite(row) and math.isfinite(col)):
+        return 0, -1, 0, -1
     return (
         max(0, math.floor(row - r - 0.5)),
         min(height - 1, math.ceil(row + r - 0.5)),
@@ -94,11 +97,8 @@ def _zbuffer(
     height, width = buffer.shape
     for p in range(cols.shape[0]):
         z = depth[p]
-        if not (z > 0.0 and math.isfinite(z) and math.isfinite(cols[p]) and math.isfinite(rows[p])):
-            continue
-        r = radius[p]
-        r2 = r * r
-        i0, i1, j0, j1 = _disk_bounds(rows[p], cols[p], r, height, width)
+        r2 = radius[p] * radius[p]
+        i0, i1, j0, j1 = _disk_bounds(rows[p], cols[p], z, radius[p], height, width)
         for i in range(i0, i1 + 1):
             dy = i + 0.5 - rows[p]
             for j in range(j0, j1 + 1):
@@ -122,11 +122,8 @@ def _blend(
     height, width = buffer.shape
     for p in range(cols.shape[0]):
         z = depth[p]
-        if not (z > 0.0 and math.isfinite(z) and math.isfinite(cols[p]) and math.isfinite(rows[p])):
-            continue
-        r = radius[p]
-        r2 = r * r
-        i0, i1, j0, j1 = _disk_bounds(rows[p], cols[p], r, height, width)
+        r2 = radius[p] * radius[p]
+        i0, i1, j0, j1 = _disk_bounds(rows[p], cols[p], z, radius[p], height, width)
         for i in range(i0, i1 + 1):
             dy = i + 0.5 - rows[p]
             for j in range(j0, j1 + 1):

@@ -82,29 +82,16 @@ def test_self_shadowing_darkens_the_torus() -> None:
     assert np.mean(shadowed[seen, 0] / lit[seen, 0]) < 0.9
 
 
-def test_cli_render_writes_rgb_and_alpha(tmp_path: Path) -> None:
+def _render_args(tmp_path: Path, size: str, points: str, grid: str, out: Path) -> list[str]:
     env = tmp_path / "env.png"
     cv2.imwrite(str(env), np.full((16, 32, 3), 200, dtype=np.uint8))
+    return ["sim", "render", "--scene", "diffuse-sphere", "--env", str(env), "--view", "0,60",
+            "--size", size, "--points", points, "--grid", grid, "-o", str(out)]  # fmt: skip
+
+
+def test_cli_render_writes_rgb_and_alpha(tmp_path: Path) -> None:
     out = tmp_path / "gt.exr"
-    args = [
-        "sim",
-        "render",
-        "--scene",
-        "diffuse-sphere",
-        "--env",
-        str(env),
-        "--view",
-        "0,60",
-        "--size",
-        "64x48",
-        "--points",
-        "5000",
-        "--grid",
-        "8",
-        "-o",
-        str(out),
-    ]
-    assert main(args) == 0
+    assert main(_render_args(tmp_path, "64x48", "5000", "8", out)) == 0
     with OpenEXR.File(str(out), separate_channels=True) as exr:
         channels = {k: v.pixels for k, v in exr.channels().items()}
     assert set(channels) == {"R", "G", "B", "A"} and channels["A"].shape == (48, 64)
@@ -123,25 +110,6 @@ def test_cli_render_writes_rgb_and_alpha(tmp_path: Path) -> None:
 def test_cli_render_refuses_bad_arguments(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], message: str
 ) -> None:
-    env = tmp_path / "env.png"
-    cv2.imwrite(str(env), np.full((16, 32, 3), 200, dtype=np.uint8))
-    args = [
-        "sim",
-        "render",
-        "--scene",
-        "diffuse-sphere",
-        "--env",
-        str(env),
-        "--view",
-        "0,60",
-        "--size",
-        "32x32",
-        "--points",
-        "1000",
-        "--grid",
-        "4",
-        "-o",
-        str(tmp_path / "o.exr"),
-    ]
+    args = _render_args(tmp_path, "32x32", "1000", "4", tmp_path / "o.exr")
     assert main(args + extra) == 2
     assert message in capsys.readouterr().err
