@@ -22,12 +22,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from processing.colour import luminance
 from processing.environment import LightingControls, light_environment
 from processing.halftone import DIFFUSION_METHODS, _diffuse, _method_tables, error_diffuse
 from processing.lights import disassemble_lights
 from processing.panorama import panorama_from_array, read_panorama
 from processing.sampling import SAMPLERS, sample_environment
+from rig.colour import luminance
 from rig.demo import bundled_panorama_path
 from rig.directions import panorama_directions, panorama_solid_angles
 

@@ -18,8 +18,8 @@ import numpy as np
 import OpenEXR
 from numpy.typing import NDArray
 
-from processing.colour import linear_to_srgb, srgb_to_linear
 from rig.atomic import atomic_path
+from rig.colour import linear_to_srgb, srgb_to_linear
 from rig.directions import rotate_panorama_yaw
 from rig.errors import PanoramaError
 

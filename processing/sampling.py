@@ -34,9 +34,9 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from processing.colour import luminance
 from processing.halftone import DIFFUSION_METHODS, error_diffuse
 from processing.median_cut import median_cut_sample
+from rig.colour import luminance
 from rig.directions import (
     direction_from_angles,
     panorama_azimuths,

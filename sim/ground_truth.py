@@ -25,6 +25,7 @@ from tqdm import tqdm
 from rig.camera_model import PinholeCamera
 from rig.directions import panorama_directions, panorama_solid_angles
 from rig.errors import InputError
+from sim.materials import specular_lobe
 from sim.scenes import SurfaceSamples
 from sim.synthetic_camera import DirectionalLight, SyntheticImage, image_of_points, light_visibility
 
@@ -148,8 +149,6 @@ def _shade(
         cos_o = nx * vx + ny * vy + nz * vz
         if cos_o <= 0.0:
             continue
-        a2 = alpha[p] * alpha[p]
-        g1_o = 2.0 * cos_o / (cos_o + math.sqrt(a2 + (1.0 - a2) * cos_o * cos_o))
         r = g = b = 0.0
         for d in range(directions.shape[0]):
             if use_visibility and not visible[d, p]:
@@ -162,11 +161,7 @@ def _shade(
             cos_h = (nx * hx + ny * hy + nz * hz) / max(
                 math.sqrt(hx * hx + hy * hy + hz * hz), 1e-300
             )
-            specular = 0.0
-            if cos_h > 0.0:
-                t = cos_h * cos_h * (a2 - 1.0) + 1.0
-                g1_i = 2.0 * cos_i / (cos_i + math.sqrt(a2 + (1.0 - a2) * cos_i * cos_i))
-                specular = a2 / (math.pi * t * t) * g1_i * g1_o / (4.0 * cos_i * cos_o)
+            specular = specular_lobe(cos_i, cos_o, cos_h, alpha[p])
             r += (rho_d[p, 0] / math.pi + f0[p, 0] * specular) * cos_i * light[d, 0]
             g += (rho_d[p, 1] / math.pi + f0[p, 1] * specular) * cos_i * light[d, 1]
             b += (rho_d[p, 2] / math.pi + f0[p, 2] * specular) * cos_i * light[d, 2]

@@ -19,14 +19,16 @@ comparison of the simulator issue is what confirms this mapping.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from rig.errors import InputError
 
-__all__ = ["Material", "brdf", "ggx_distribution", "smith_g1"]
+__all__ = ["Material", "brdf", "ggx_distribution", "smith_g1", "specular_lobe"]
 
 
 @dataclass(frozen=True)
@@ -108,3 +110,19 @@ def brdf(
     specular = ggx_distribution(cos_h, a) * smith_g1(cos_i, a) * smith_g1(cos_o, a) / safe
     value = np.asarray(rho_d, dtype=np.float64) / np.pi + np.asarray(f0) * specular[..., None]
     return np.where(lit[..., None], value, 0.0)
+
+
+@numba.njit(cache=True, inline="always")
+def specular_lobe(cos_i: float, cos_o: float, cos_h: float, alpha: float) -> float:
+    """D(h) G(wi, wo) / (4 cos_i cos_o) for one pair of directions above the surface (1/sr).
+
+    The scalar form of :func:`brdf`'s specular part for the numba shading kernels (tests hold
+    them equal); ``cos_i`` and ``cos_o`` must be positive.
+    """
+    if cos_h <= 0.0:
+        return 0.0
+    a2 = alpha * alpha
+    t = cos_h * cos_h * (a2 - 1.0) + 1.0
+    g1_i = 2.0 * cos_i / (cos_i + math.sqrt(a2 + (1.0 - a2) * cos_i * cos_i))
+    g1_o = 2.0 * cos_o / (cos_o + math.sqrt(a2 + (1.0 - a2) * cos_o * cos_o))
+    return a2 / (math.pi * t * t) * g1_i * g1_o / (4.0 * cos_i * cos_o)

@@ -6,8 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from processing.colour import linear_to_srgb, srgb_to_linear
 from processing.panorama import adjust_panorama, panorama_from_array, read_panorama, write_panorama
+from rig.colour import linear_to_srgb, srgb_to_linear
 from rig.errors import PanoramaError
 
 

@@ -6,8 +6,15 @@ import pytest
 from rig.camera_model import PinholeCamera
 from rig.directions import direction_from_angles_deg
 from rig.errors import InputError
+from sim.materials import brdf
 from sim.scenes import TORUS_MAJOR, TORUS_MINOR, build_scene
-from sim.synthetic_camera import DirectionalLight, PointLight, light_visibility, render_under_light
+from sim.synthetic_camera import (
+    DirectionalLight,
+    PointLight,
+    light_visibility,
+    render_under_light,
+    shade_points,
+)
 
 RHO = np.array([0.75, 0.60, 0.45])  # diffuse-sphere
 
@@ -26,6 +33,21 @@ def test_light_along_the_normal_gives_rho_over_pi(sphere) -> None:  # type: igno
     cam = PinholeCamera(30.0, 60.0, 4.0, 40.0, 128, 128)
     image = render_under_light(sphere, cam, DirectionalLight(_towards(30.0, 60.0)))
     np.testing.assert_allclose(image.rgb[64, 64], RHO / np.pi, rtol=2e-3)
+
+
+def test_shading_kernel_evaluates_the_material_model() -> None:
+    s = build_scene("glossy-sphere", 2000)
+    light = PointLight((1.5, 2.0, 2.5), intensity=3.0)
+    viewpoint = np.array([0.5, 3.0, 1.0])
+    got = shade_points(s, viewpoint, light, shadows=False)
+    offset = np.array(light.position) - s.points
+    distance = np.linalg.norm(offset, axis=1, keepdims=True)
+    towards, view = offset / distance, viewpoint - s.points
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    cosine = np.maximum(np.sum(s.normals * towards, axis=1, keepdims=True), 0)
+    expected = brdf(s.normals, towards, view, s.rho_d, s.f0, s.alpha) * cosine * 3.0 / distance**2
+    assert (expected > 0).any(axis=1).mean() > 0.2
+    np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
 
 
 def test_point_light_falls_off_with_distance_squared(sphere) -> None:  # type: ignore[no-untyped-def]
