@@ -20,14 +20,15 @@ from numpy.typing import NDArray
 
 from rig.atomic import atomic_path
 from rig.colour import linear_to_srgb, srgb_to_linear
-from rig.directions import rotate_panorama_yaw
-from rig.errors import PanoramaError
+from rig.directions import panorama_solid_angles, rotate_panorama_yaw
+from rig.errors import InputError, PanoramaError
 
 __all__ = [
     "NEGATIVE_TOLERANCE",
     "PANORAMA_SUFFIXES",
     "Panorama",
     "adjust_panorama",
+    "downsample_panorama",
     "panorama_from_array",
     "read_image",
     "read_panorama",
@@ -279,3 +280,30 @@ def adjust_panorama(panorama: Panorama, *, yaw_deg: float = 0.0, exposure: float
     if exposure != 1.0:
         rgb = rgb * np.float32(exposure)
     return Panorama(rgb=np.ascontiguousarray(rgb, dtype=np.float32), source=panorama.source)
+
+
+def downsample_panorama(rgb: NDArray[np.floating], height: int) -> NDArray[np.float32]:
+    """Pre-filter a panorama to ``height`` rows by solid-angle-weighted block means.
+
+    Each output pixel holds the mean radiance of the input pixels it covers, weighted by their
+    solid angle, so the solid-angle integral (the total light) is unchanged.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (H, 2H, 3), linear radiance
+    height : int, a divisor of H
+
+    Returns
+    -------
+    ndarray, shape (height, 2 height, 3), float32
+    """
+    image = np.asarray(rgb, dtype=np.float64)
+    rows = image.shape[0]
+    if height < 1 or rows % height:
+        raise InputError(f"the panorama's {rows} rows cannot be split into {height} equal blocks")
+    factor = rows // height
+    omega = panorama_solid_angles(rows, image.shape[1])
+    shape = (height, factor, 2 * height, factor)
+    energy = (image * omega[:, :, None]).reshape(*shape, 3).sum(axis=(1, 3))
+    area = omega.reshape(shape).sum(axis=(1, 3))
+    return (energy / area[:, :, None]).astype(np.float32)

@@ -39,6 +39,7 @@ from processing.median_cut import median_cut_sample
 from rig.colour import luminance
 from rig.directions import (
     direction_from_angles,
+    fibonacci_sphere,
     panorama_azimuths,
     panorama_inclinations,
     panorama_pixel_points,
@@ -308,10 +309,7 @@ def settle_count(
 
 def _fibonacci_sphere(k: int, seed: int) -> NDArray[np.float64]:
     """K near-uniform directions (spherical Fibonacci lattice) under a seeded random rotation."""
-    i = np.arange(k, dtype=np.float64)
-    z = 1.0 - (2.0 * i + 1.0) / k
-    golden_angle = np.pi * (3.0 - np.sqrt(5.0))
-    lattice = direction_from_angles(golden_angle * i, np.arccos(z))
+    lattice = fibonacci_sphere(k)
     q = np.random.default_rng(seed).normal(size=4)  # uniform random rotation (unit quaternion)
     w, x, y, zq = q / np.linalg.norm(q)
     rotation = np.array(

@@ -71,12 +71,17 @@ class PinholeCamera:
     def axes(self) -> NDArray[np.float64]:
         """Rows: the camera's right, up and forward unit vectors in the rig frame; (3, 3)."""
         forward = -self.direction
-        up = np.array([0.0, 0.0, 1.0])
-        up = up - (up @ forward) * forward
-        if np.linalg.norm(up) < 1e-9:  # straight above or below: the limit along the azimuth
-            horizontal = direction_from_angles_deg(self.azimuth_deg, 90.0)
-            up = -horizontal if forward[2] < 0 else horizontal
-        up = up / np.linalg.norm(up)
+        # The projection of +z normalised, in closed form: the derivative of the direction with
+        # respect to inclination, negated. Exact near the poles, and at them it is the limit
+        # along the azimuth.
+        azimuth, inclination = np.radians(self.azimuth_deg), np.radians(self.inclination_deg)
+        up = np.array(
+            [
+                -np.cos(inclination) * np.cos(azimuth),
+                -np.cos(inclination) * np.sin(azimuth),
+                np.sin(inclination),
+            ]
+        )
         right = np.cross(forward, up)
         return np.stack([right, up, forward])
 

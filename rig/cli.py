@@ -11,6 +11,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from rig.errors import RigError
 
@@ -72,6 +73,132 @@ def _run_sample(args: argparse.Namespace) -> int:
         f"{lights.rgb.sum(axis=0).round(4).tolist()} (RGB radiance x sr) -> {args.output}/"
     )
     return 0
+
+
+def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from processing.interpolation import METHODS
+    from processing.sampling import SAMPLERS
+    from render.relighter import SCHEMES
+
+    p = commands.add_parser(
+        "relight",
+        help="relight a reflectance field under a panorama",
+        description="Relight a reflectance field store (rig sim field, or an imported RTI "
+        "capture) under an environment panorama and render a view. The suffix of -o picks the "
+        "output: .exr (linear RGB + coverage alpha), .png (tone-mapped), .gif/.mp4 (a sequence: "
+        "see --sequence).",
+    )
+    p.add_argument("field", type=Path, help="reflectance field store")
+    p.add_argument("--env", type=Path, required=True, help="panorama file")
+    p.add_argument("--scheme", choices=SCHEMES, help="how the panorama lights the field "
+                   "(default: the most accurate the field supports)")  # fmt: skip
+    p.add_argument("-k", type=int, default=64, help="sampled lights (scheme sampled, default 64)")
+    p.add_argument("--sampler", choices=SAMPLERS, default="tmed", help="sampler (default tmed)")
+    p.add_argument("--interp", choices=METHODS, help="interpolation over the measured lights")
+    p.add_argument("--view-interp", choices=METHODS, help="interpolation over the cameras")
+    p.add_argument("-m", type=int, default=3, help="nearest measured lights (paper, default 3)")
+    p.add_argument("-n", type=int, default=3, help="nearest measured cameras (paper, default 3)")
+    p.add_argument("--paper", action="store_true", help="the paper's configuration exactly")
+    p.add_argument("--view", type=_angles, help="camera AZ,INCL in degrees (pixel fields: theirs)")
+    _add_camera_options(p)
+    p.add_argument("--yaw", type=float, default=0.0, help="rotate the environment, degrees CCW")
+    p.add_argument("--exposure", type=float, default=1.0, help="radiance scale (default 1)")
+    p.add_argument(
+        "--sequence",
+        choices=("turntable", "environment"),
+        default="environment",
+        help="for .gif/.mp4: orbit the camera, or rotate the environment (default)",
+    )
+    p.add_argument("--frames", type=int, default=36, help="frames of a sequence (default 36)")
+    p.add_argument("--fps", type=float, default=12.0, help="frames per second (default 12)")
+    p.add_argument("-o", "--output", type=Path, required=True, help=".exr/.png/.gif/.mp4")
+    p.set_defaults(handler=_run_relight)
+
+
+def _run_relight(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from processing.panorama import read_panorama
+    from processing.reflectance_field import ReflectanceField
+    from render.output import (
+        IMAGE_SUFFIXES,
+        SEQUENCE_SUFFIXES,
+        display_picture,
+        write_image,
+        write_sequence,
+    )
+    from render.relighter import Relighter, RelightSettings, best_settings
+    from rig.camera_model import PinholeCamera
+
+    suffix = args.output.suffix.lower()
+    if suffix not in IMAGE_SUFFIXES + SEQUENCE_SUFFIXES:
+        raise RigError(
+            f"{args.output}: write one of {', '.join(IMAGE_SUFFIXES + SEQUENCE_SUFFIXES)}"
+        )
+    field = ReflectanceField.open(args.field)
+    panorama = read_panorama(args.env)
+    if args.paper:
+        settings = RelightSettings.paper_configuration(k=args.k)
+    else:
+        settings = best_settings(field) if args.scheme is None else RelightSettings(args.scheme)
+        settings = replace(settings, k=args.k, sampler=args.sampler, m=args.m, n=args.n)
+        if args.interp:
+            settings = replace(settings, interpolation=args.interp)
+        if args.view_interp:
+            settings = replace(settings, view_interpolation=args.view_interp)
+    if field.sample_kind == "pixels":
+        camera = field.cameras[0]
+        if args.view is not None:
+            raise RigError(f"{args.field} holds one fixed view; drop --view")
+    else:
+        if args.view is None:
+            raise RigError(f"--view AZ,INCL is needed to render the points of {args.field}")
+        camera = PinholeCamera(
+            args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
+        )
+    relighter = Relighter(field, settings)
+    if suffix in IMAGE_SUFFIXES:
+        relighter.set_lighting(panorama, yaw_deg=args.yaw, exposure=args.exposure)
+        relighter.set_view(camera)
+        image = relighter.render()
+        write_image(args.output, image.rgb, image.coverage)
+        _report_relit(args, image.holes, image.outside_fraction)
+        return 0
+    if args.frames < 1:
+        raise RigError(f"--frames must be at least 1, got {args.frames}")
+    if args.sequence == "turntable" and field.sample_kind == "pixels":
+        raise RigError(f"{args.field} holds one fixed view: use --sequence environment")
+    frames, exposure = [], None
+    relighter.set_lighting(panorama, yaw_deg=args.yaw, exposure=args.exposure)
+    relighter.set_view(camera)
+    from tqdm import tqdm
+
+    for frame in tqdm(range(args.frames), desc="frames", unit="frame"):
+        step = 360.0 * frame / args.frames
+        if args.sequence == "environment":
+            relighter.set_lighting(panorama, yaw_deg=args.yaw + step, exposure=args.exposure)
+        else:
+            relighter.set_view(replace(camera, azimuth_deg=(camera.azimuth_deg + step) % 360.0))
+        image = relighter.render()
+        if exposure is None:
+            from render.tonemap import auto_exposure
+
+            exposure = auto_exposure(image.rgb[image.coverage]) if image.coverage.any() else 1.0
+        frames.append(display_picture(image.rgb, image.coverage, exposure))
+    write_sequence(args.output, frames, fps=args.fps)
+    print(f"{args.frames} frames ({args.sequence}) -> {args.output}")
+    return 0
+
+
+def _report_relit(args: argparse.Namespace, holes: Any, outside: float) -> None:
+    print(f"{args.field} under {args.env} -> {args.output}")
+    if holes.any():
+        print(f"warning: {int(holes.sum())} visible samples are seen by no chosen camera (holes)")
+    if outside > 0.05:
+        print(
+            f"warning: {outside:.0%} of the light comes from outside the measured lights "
+            "(below the lowest ring, say); it is moved to the nearest measured lights"
+        )
 
 
 def _add_demo(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -319,6 +446,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_sample(commands)
     _add_demo(commands)
+    _add_relight(commands)
     _add_sim(commands)
     return parser
 

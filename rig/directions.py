@@ -30,6 +30,7 @@ __all__ = [
     "angles_from_direction",
     "direction_from_angles",
     "direction_from_angles_deg",
+    "fibonacci_sphere",
     "hemisphere_layout",
     "normalize",
     "panorama_azimuths",
@@ -233,6 +234,21 @@ def rotate_panorama_yaw(image: NDArray[np.floating], yaw_deg: float) -> NDArray[
     return ((1.0 - frac) * base + frac * following).astype(image.dtype, copy=False)
 
 
+#: Azimuth step of the spherical Fibonacci lattice, radians (the golden angle).
+GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
+
+
+def fibonacci_sphere(count: int) -> FloatArray:
+    """``count`` near-uniform unit vectors over the whole sphere (spherical Fibonacci lattice).
+
+    Point i sits at azimuth i x golden angle and z = 1 - (2 i + 1) / count; shape (count, 3).
+    """
+    if count < 1:
+        raise InputError(f"a lattice needs at least one direction, got {count}")
+    i = np.arange(count, dtype=np.float64) + 0.5
+    return direction_from_angles(GOLDEN_ANGLE * (i - 0.5), np.arccos(1.0 - 2.0 * i / count))
+
+
 def hemisphere_layout(count: int, layout: str = "grid") -> FloatArray:
     """``count`` directions over the upper hemisphere (inclination below 90 degrees).
 
@@ -253,7 +269,7 @@ def hemisphere_layout(count: int, layout: str = "grid") -> FloatArray:
         raise InputError(f"a layout needs at least one direction, got {count}")
     i = np.arange(count, dtype=np.float64) + 0.5
     if layout == "fibonacci":
-        return direction_from_angles(np.pi * (3.0 - np.sqrt(5.0)) * i, np.arccos(1.0 - i / count))
+        return direction_from_angles(GOLDEN_ANGLE * i, np.arccos(1.0 - i / count))
     if layout != "grid":
         raise InputError(f"unknown layout {layout!r}; use 'grid' or 'fibonacci'")
     rings = max(1, round(float(np.sqrt(count / 2.0))))

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.directions import direction_from_angles
+from rig.directions import fibonacci_sphere
 from rig.errors import InputError
 from sim.materials import Material
 
@@ -87,12 +87,6 @@ class SceneSpec:
             "geometry": self.geometry,
             "material": material,
         }
-
-
-def fibonacci_sphere(count: int) -> NDArray[np.float64]:
-    """``count`` near-uniform unit vectors (spherical Fibonacci lattice); shape (count, 3)."""
-    i = np.arange(count, dtype=np.float64) + 0.5
-    return direction_from_angles(2.0 * np.pi * GOLDEN * i, np.arccos(1.0 - 2.0 * i / count))
 
 
 def _sphere(

@@ -23,9 +23,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from rig.camera_model import PinholeCamera
 from rig.errors import InputError
+from rig.splat import blend_splats, depth_at_points, shown_points, zbuffer
 from sim.materials import specular_lobe
 from sim.scenes import SurfaceSamples
-from sim.splat import blend_splats, depth_at_points, zbuffer
 
 __all__ = [
     "DirectionalLight",
@@ -249,9 +249,9 @@ def _camera_splats(
 
 
 def camera_visibility(samples: SurfaceSamples, camera: PinholeCamera) -> NDArray[np.bool_]:
-    """Which points (P,) the camera sees: facing it and at the front of its z-buffer."""
-    cols, rows, depth, _, buffer = _camera_splats(samples, camera)
-    return depth <= depth_at_points(cols, rows, buffer) + DEPTH_TOLERANCE * samples.spacing
+    """Which points (P,) the camera sees: facing it and blending into at least one pixel."""
+    cols, rows, depth, radius, buffer = _camera_splats(samples, camera)
+    return shown_points(cols, rows, depth, radius, buffer, DEPTH_TOLERANCE * samples.spacing)
 
 
 def image_of_points(
@@ -260,7 +260,7 @@ def image_of_points(
     """Splat points of known radiance (P, 3) into the camera's image, with visibility."""
     cols, rows, depth, radius, buffer = _camera_splats(samples, camera)
     tolerance = DEPTH_TOLERANCE * samples.spacing
-    visible = depth <= depth_at_points(cols, rows, buffer) + tolerance
+    visible = shown_points(cols, rows, depth, radius, buffer, tolerance)
     colours = np.asarray(radiance, dtype=np.float64)
     image, weight = blend_splats(cols, rows, depth, radius, colours, buffer, tolerance)
     return SyntheticImage(

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 
@@ -72,3 +73,52 @@ def test_demo_writes_pictures_and_report(tmp_path: Path) -> None:
     for run in runs:
         assert run in report
         assert (tmp_path / "sampling" / run / "overlay.png").stat().st_size > 0
+
+
+@pytest.fixture(scope="module")
+def small_field(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("field") / "f.zarr"
+    args = ["sim", "field", "--scene", "glossy-sphere", "--lights", "10", "--cameras", "6",
+            "--points", "3000", "--size", "48x48", "-o", str(out)]  # fmt: skip
+    assert main(args) == 0
+    return out
+
+
+@pytest.mark.parametrize("name", ["relit.exr", "relit.png", "turn.gif"])
+def test_relight_writes_images_and_sequences(
+    tmp_path: Path, small_field: Path, courtyard_path: Path, name: str
+) -> None:
+    args = ["relight", str(small_field), "--env", str(courtyard_path), "--view", "30,50",
+            "--size", "48x48", "--frames", "3", "--sequence", "turntable", "-o",
+            str(tmp_path / name)]  # fmt: skip
+    assert main(args) == 0
+    assert (tmp_path / name).stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        ([], "--view AZ,INCL is needed"),
+        (["--view", "30,50", "-o", "x.bmp"], "x.bmp"),
+        (["--view", "30,50", "--scheme", "mirror"], "invalid choice"),
+    ],
+)
+def test_relight_refuses_bad_requests(
+    tmp_path: Path,
+    small_field: Path,
+    courtyard_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    extra: list[str],
+    message: str,
+) -> None:
+    args = [
+        "relight",
+        str(small_field),
+        "--env",
+        str(courtyard_path),
+        "-o",
+        str(tmp_path / "a.png"),
+    ]
+    with contextlib.suppress(SystemExit):
+        assert main(args + extra) == 2
+    assert message in capsys.readouterr().err

@@ -1,5 +1,8 @@
 """Point splatting kernels: a z-buffer of disks, and depth-tested blending (numba).
 
+Shared by the simulator's camera and the renderer (``render.splat``), so both live beside the
+camera model they project with.
+
 Points are disks of a given pixel radius at continuous image coordinates (pixel (i, j) is centred
 at (i + 0.5, j + 0.5)). The same z-buffer serves the camera (visibility) and the light (shadow
 map). Blending keeps every splat within a depth tolerance of the front surface, weighted by
@@ -14,7 +17,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["blend_splats", "depth_at_points", "zbuffer"]
+__all__ = ["blend_splats", "depth_at_points", "disk_bounds", "shown_points", "zbuffer"]
 
 
 def zbuffer(
@@ -44,6 +47,24 @@ def depth_at_points(
     return out
 
 
+def shown_points(
+    cols: NDArray[np.float64],
+    rows: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    buffer: NDArray[np.float64],
+    tolerance: float,
+) -> NDArray[np.bool_]:
+    """Points (P,) whose splat blends into at least one pixel: the points an image shows.
+
+    A point on a steep (grazing) surface can fail the depth test at its own centre yet show
+    at a neighbouring pixel; it is seen, and its radiance is needed.
+    """
+    shown = np.zeros(cols.shape, dtype=np.bool_)
+    _shown(cols, rows, depth, radius, buffer, tolerance, shown)
+    return shown
+
+
 def blend_splats(
     cols: NDArray[np.float64],
     rows: NDArray[np.float64],
@@ -71,11 +92,13 @@ def blend_splats(
 
 
 @numba.njit(cache=True, inline="always")
-def _disk_bounds(
+def disk_bounds(
     row: float, col: float, depth: float, r: float, height: int, width: int
 ) -> tuple[int, int, int, int]:
-    # Rows and columns whose pixel centres (index + 0.5) may lie within r of (row, col); an
-    # empty range for a point behind the camera or off any finite position.
+    """Row and column ranges (i0, i1, j0, j1) whose pixel centres may lie within r of (row, col).
+
+    An empty range for a point behind the camera or off any finite position.
+    """
     if not (depth > 0.0 and math.isfinite(depth) and math.isfinite(row) and math.isfinite(col)):
         return 0, -1, 0, -1
     return (
@@ -98,7 +121,7 @@ def _zbuffer(
     for p in range(cols.shape[0]):
         z = depth[p]
         r2 = radius[p] * radius[p]
-        i0, i1, j0, j1 = _disk_bounds(rows[p], cols[p], z, radius[p], height, width)
+        i0, i1, j0, j1 = disk_bounds(rows[p], cols[p], z, radius[p], height, width)
         for i in range(i0, i1 + 1):
             dy = i + 0.5 - rows[p]
             for j in range(j0, j1 + 1):
@@ -123,7 +146,7 @@ def _blend(
     for p in range(cols.shape[0]):
         z = depth[p]
         r2 = radius[p] * radius[p]
-        i0, i1, j0, j1 = _disk_bounds(rows[p], cols[p], z, radius[p], height, width)
+        i0, i1, j0, j1 = disk_bounds(rows[p], cols[p], z, radius[p], height, width)
         for i in range(i0, i1 + 1):
             dy = i + 0.5 - rows[p]
             for j in range(j0, j1 + 1):
@@ -135,3 +158,28 @@ def _blend(
                     total[i, j, 1] += w * colours[p, 1]
                     total[i, j, 2] += w * colours[p, 2]
                     weight[i, j] += w
+
+
+@numba.njit(cache=True)
+def _shown(
+    cols: NDArray[np.float64],
+    rows: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    buffer: NDArray[np.float64],
+    tolerance: float,
+    shown: NDArray[np.bool_],
+) -> None:
+    height, width = buffer.shape
+    for p in range(cols.shape[0]):
+        r2 = radius[p] * radius[p]
+        i0, i1, j0, j1 = disk_bounds(rows[p], cols[p], depth[p], radius[p], height, width)
+        for i in range(i0, i1 + 1):
+            dy = i + 0.5 - rows[p]
+            for j in range(j0, j1 + 1):
+                dx = j + 0.5 - cols[p]
+                if dx * dx + dy * dy <= r2 and depth[p] <= buffer[i, j] + tolerance:
+                    shown[p] = True
+                    break
+            if shown[p]:
+                break

@@ -1,0 +1,633 @@
+"""Interpolation weights over measured directions (lights or cameras) for query directions.
+
+A reflectance field is measured at a few directions (unit vectors, rig frame, pointing from the
+object toward the light or the camera). Relighting needs, for every query direction (a sampled
+environment light, a panorama pixel, the wanted view), sparse weights over the measured ones:
+``value(query) = sum_j weights[q, j] * value[indices[q, j]]``. Four schemes
+(``docs/interpolation.md``):
+
+``paper``
+    The paper's section 4.1, eq. 1, literally: the m nearest measured directions by angle, each
+    weighted by the cosine of its angle to the query, normalised to sum 1. Not interpolating: a
+    query equal to a measured direction still blends its m - 1 neighbours in.
+``nearest``
+    The single nearest measured direction.
+``barycentric``
+    Planar barycentric coordinates of the point where the query ray crosses the flat (chord)
+    triangle that contains it, in a spherical Delaunay triangulation of the measured set.
+    Exact at measured directions, linear along edges, continuous.
+``rbf``
+    A Gaussian in angle over the 8 nearest, lowered by its value at the 9th nearest so that the
+    weights stay continuous as the query moves, normalised.
+
+Outside the measured region. The region is the spherical convex hull of the measured directions
+(for a rig's upper-hemisphere set: everything above the polygon of its lowest lights; below the
+horizon is always outside). Every result flags the queries outside it (``outside``), so callers
+can measure how much light or view it concerns, and a policy handles them: ``clamp`` (default)
+moves the query to the nearest point of the region (barycentric: weights on the two ends of the
+nearest boundary edge, or on one corner; the other methods already pick the nearest measured
+directions), ``zero`` gives them all-zero weights (their light is dropped).
+
+The triangulation is the convex hull of the measured directions together with the origin: its
+faces that do not touch the origin tile the region (they are the spherical Delaunay triangles),
+the faces through the origin are the region's bounding planes. Measured sets on one great circle
+(or of one or two directions) have no triangles: their region is that arc (or those points),
+and queries off it are outside.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import ConvexHull, QhullError, cKDTree
+
+from rig.directions import (
+    angle_between,
+    angles_deg_from_direction,
+    direction_from_angles,
+    direction_from_angles_deg,
+)
+from rig.errors import InputError
+
+__all__ = [
+    "METHODS",
+    "POLICIES",
+    "RBF_NEIGHBOURS",
+    "DirectionWeights",
+    "interpolation_weights",
+    "mean_spacing_deg",
+]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+#: Interpolation schemes of :func:`interpolation_weights`.
+METHODS = ("paper", "nearest", "barycentric", "rbf")
+#: Handling of queries outside the measured region.
+POLICIES = ("clamp", "zero")
+#: Measured directions an ``rbf`` weight row spans (one more sets the kernel's zero level).
+RBF_NEIGHBOURS = 8
+
+#: Measured directions closer than this (radians, as a chord) are refused as duplicates.
+_DUPLICATE = 1e-9
+#: A hull face whose plane passes within this of the origin bounds the region (no triangle).
+_PLANE = 1e-12
+#: A query is inside a triangle when no barycentric coordinate is below -this x their sum.
+_LAMBDA = 1e-10
+#: Queries per block of the point-location kernel (each block walks from its last triangle).
+_BLOCK = 256
+
+
+@dataclass(frozen=True)
+class DirectionWeights:
+    """Sparse weights of Q query directions over N measured directions.
+
+    Attributes
+    ----------
+    indices : ndarray, shape (Q, k), int64
+        Measured directions each query uses; always valid indices (unused slots repeat one).
+    weights : ndarray, shape (Q, k), float64
+        Their weights, >= 0; each row sums to 1, except rows of outside queries under the
+        ``zero`` policy, which are all 0. Unused slots have weight 0.
+    outside : ndarray, shape (Q,), bool
+        Queries outside the measured region (the spherical convex hull of the measured set).
+    """
+
+    indices: IntArray
+    weights: FloatArray
+    outside: NDArray[np.bool_]
+
+    def __post_init__(self) -> None:
+        if self.indices.ndim != 2 or self.weights.shape != self.indices.shape:
+            raise InputError(
+                f"indices and weights must have one shape (Q, k), got {self.indices.shape} "
+                f"and {self.weights.shape}"
+            )
+        if self.outside.shape != self.indices.shape[:1]:
+            raise InputError(
+                f"outside must have shape ({self.indices.shape[0]},), got {self.outside.shape}"
+            )
+
+    def _check_count(self, count: int, what: str) -> None:
+        needed = int(self.indices.max()) + 1 if self.indices.size else 0
+        if count < needed:
+            raise InputError(f"{what} has {count} measured directions; the weights use {needed}")
+
+    def dense(self, count: int) -> FloatArray:
+        """The weights as a dense matrix of shape (Q, count), float64 (count >= N)."""
+        self._check_count(count, "dense matrix")
+        rows = np.arange(self.indices.shape[0], dtype=np.int64)[:, None]
+        flat = (rows * count + self.indices).ravel()
+        size = self.indices.shape[0] * count
+        dense = np.bincount(flat, weights=self.weights.ravel(), minlength=size)
+        return dense.astype(np.float64, copy=False).reshape(self.indices.shape[0], count)
+
+    def apply(self, values: ArrayLike) -> FloatArray:
+        """Interpolate per-direction values of shape (N, ...) to the queries: (Q, ...), float64."""
+        v = np.asarray(values)
+        if v.ndim < 1:
+            raise InputError(f"values must have shape (N, ...), got a scalar {v!r}")
+        self._check_count(v.shape[0], f"values of shape {v.shape}")
+        out = np.zeros(self.indices.shape[:1] + v.shape[1:], dtype=np.float64)
+        expand = (slice(None),) + (None,) * (v.ndim - 1)
+        for j in range(self.indices.shape[1]):
+            out += self.weights[:, j][expand] * v[self.indices[:, j]]
+        return out
+
+
+def interpolation_weights(
+    measured: ArrayLike,
+    queries: ArrayLike,
+    method: str,
+    *,
+    m: int = 3,
+    width_deg: float | None = None,
+    policy: str = "clamp",
+) -> DirectionWeights:
+    """Weights of each query direction over the measured directions.
+
+    Parameters
+    ----------
+    measured : array_like, shape (N, 3)
+        Measured directions (rig frame; normalised here). N >= 1, no zero, non-finite or
+        duplicate (closer than 1e-9 rad) directions.
+    queries : array_like, shape (Q, 3)
+        Query directions (normalised here); Q may be 0.
+    method : {"paper", "nearest", "barycentric", "rbf"}
+        See the module docstring. Weight columns k: ``paper`` min(m, N), ``nearest`` 1,
+        ``barycentric`` 3, ``rbf`` min(8, N).
+    m : int, >= 1
+        Neighbours of the ``paper`` method (capped at N); the other methods ignore it.
+    width_deg : float, optional, degrees in (0, 180]
+        Standard deviation of the ``rbf`` Gaussian; default :func:`mean_spacing_deg` of the
+        measured set (any width for N = 1). Only for ``rbf``.
+    policy : {"clamp", "zero"}
+        Queries outside the measured region: ``clamp`` moves them to its nearest point,
+        ``zero`` gives them zero weights. Either way they are flagged in ``outside``.
+
+    Returns
+    -------
+    DirectionWeights
+        ``indices`` (Q, k) int64, ``weights`` (Q, k) float64, ``outside`` (Q,) bool.
+
+    Raises
+    ------
+    InputError
+        Bad shapes, zero or non-finite vectors, duplicate measured directions, m < 1, an
+        unknown method or policy, a width out of range or given to another method.
+    """
+    if method not in METHODS:
+        raise InputError(f"unknown interpolation method {method!r}; use one of {METHODS}")
+    if policy not in POLICIES:
+        raise InputError(f"unknown outside policy {policy!r}; use one of {POLICIES}")
+    if isinstance(m, bool) or not isinstance(m, int | np.integer) or m < 1:
+        raise InputError(f"m (neighbours of the paper method) must be an integer >= 1, got {m!r}")
+    if width_deg is not None and method != "rbf":
+        raise InputError(f"width_deg applies to method 'rbf' only, got it for {method!r}")
+    points, tree = _measured(measured)
+    q = _unit_rows(queries, "queries", "query", "Q", allow_empty=True)
+    region = _Region.build(points)
+    if method == "barycentric":
+        return region.barycentric(q, clamp=policy == "clamp")
+    if method == "paper":
+        indices, weights = _paper(tree, q, int(m), len(points))
+    elif method == "nearest":
+        indices, weights = _nearest(tree, q)
+    else:
+        if width_deg is None:
+            width = _mean_spacing(tree) if len(points) > 1 else 1.0
+        else:
+            width = _width_radians(width_deg)
+        indices, weights = _rbf(tree, q, len(points), width)
+    outside = region.outside(q)
+    if policy == "zero":
+        weights[outside] = 0.0
+    return DirectionWeights(indices, weights, outside)
+
+
+def mean_spacing_deg(measured: ArrayLike) -> float:
+    """Mean angle, in degrees, from each measured direction to its nearest neighbour.
+
+    Parameters
+    ----------
+    measured : array_like, shape (N, 3), N >= 2 (normalised here)
+
+    Returns
+    -------
+    float, degrees
+    """
+    points, tree = _measured(measured)
+    if len(points) < 2:
+        raise InputError(f"the spacing of a set needs two directions or more, got {len(points)}")
+    spacing = _mean_spacing(tree)
+    return float(angles_deg_from_direction(direction_from_angles(0.0, spacing))[1])
+
+
+# --- input ------------------------------------------------------------------------------------
+
+
+def _unit_rows(
+    value: ArrayLike, name: str, item: str, letter: str, *, allow_empty: bool
+) -> FloatArray:
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise InputError(f"{name} must be an array of shape ({letter}, 3): {error}") from None
+    least = 0 if allow_empty else 1
+    if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] < least:
+        raise InputError(
+            f"{name} must have shape ({letter}, 3) with {letter} >= {least}, got {a.shape}"
+        )
+    with np.errstate(over="ignore", invalid="ignore"):
+        norm = np.linalg.norm(a, axis=1)
+    bad = np.flatnonzero(~(np.isfinite(norm) & (norm > 0)))
+    if bad.size:
+        raise InputError(
+            f"{item} direction {int(bad[0])} is zero or not finite: {a[bad[0]].tolist()}"
+        )
+    return a / norm[:, None]
+
+
+def _measured(measured: ArrayLike) -> tuple[FloatArray, Any]:
+    points = _unit_rows(measured, "measured", "measured", "N", allow_empty=False)
+    tree = cKDTree(points)
+    if len(points) > 1:
+        chord, other = tree.query(points, k=2)
+        close = np.flatnonzero(chord[:, 1] < _DUPLICATE)
+        if close.size:
+            i = int(close[0])
+            j = int(other[i, 1]) if int(other[i, 1]) != i else int(other[i, 0])
+            raise InputError(
+                f"measured directions {min(i, j)} and {max(i, j)} coincide: {points[i].tolist()}"
+            )
+    return points, tree
+
+
+def _width_radians(width_deg: float) -> float:
+    try:
+        w = float(width_deg)
+    except (TypeError, ValueError):
+        w = math.nan
+    if not (math.isfinite(w) and 0.0 < w <= 180.0):
+        raise InputError(f"width_deg must be in (0, 180] degrees, got {width_deg!r}")
+    return float(angle_between((0.0, 0.0, 1.0), direction_from_angles_deg(0.0, w)))
+
+
+def _mean_spacing(tree: Any) -> float:
+    chord, _ = tree.query(tree.data, k=2)
+    return float(np.mean(_chord_angle(chord[:, 1])))
+
+
+def _chord_angle(chord: FloatArray) -> FloatArray:
+    return 2.0 * np.arcsin(np.minimum(0.5 * chord, 1.0))
+
+
+def _knn(tree: Any, queries: FloatArray, k: int) -> tuple[FloatArray, IntArray]:
+    chord, index = tree.query(queries, k=k, workers=-1)
+    shape = (queries.shape[0], k)
+    return np.reshape(chord, shape), np.reshape(index, shape).astype(np.int64)
+
+
+# --- the kNN methods --------------------------------------------------------------------------
+
+
+def _paper(tree: Any, queries: FloatArray, m: int, count: int) -> tuple[IntArray, FloatArray]:
+    # Eq. 1: w_t = cos(angle(query, t)) over the m nearest t, normalised; cosines below 0 (more
+    # than 90 degrees away) count 0, and a query with all m beyond 90 degrees takes the nearest.
+    # For unit vectors at chord distance c, cos(angle) = 1 - c^2 / 2 exactly.
+    chord, index = _knn(tree, queries, min(m, count))
+    cosine = np.maximum(1.0 - 0.5 * chord * chord, 0.0)
+    total = cosine.sum(axis=1)
+    none = total <= 0.0
+    cosine[none, 0] = 1.0
+    total[none] = 1.0
+    return index, cosine / total[:, None]
+
+
+def _nearest(tree: Any, queries: FloatArray) -> tuple[IntArray, FloatArray]:
+    _, index = _knn(tree, queries, 1)
+    return index, np.ones(index.shape)
+
+
+def _rbf(tree: Any, queries: FloatArray, count: int, width: float) -> tuple[IntArray, FloatArray]:
+    # g_i = exp(-angle_i^2 / (2 width^2)), taken relative to the nearest (no underflow far from
+    # the set) and lowered by g at the (k+1)-th nearest, so a direction enters or leaves the k
+    # nearest with weight 0 and the weights are continuous in the query.
+    k = min(RBF_NEIGHBOURS, count)
+    chord, index = _knn(tree, queries, min(k + 1, count))
+    angle = _chord_angle(chord)
+    g = np.exp(-(angle**2 - angle[:, :1] ** 2) / (2.0 * width * width))
+    weights = g[:, :k] - g[:, k:] if g.shape[1] > k else g.copy()
+    total = weights.sum(axis=1)
+    tied = total < 1e-9  # the k+1 nearest (nearly) equidistant: keep the plain Gaussian
+    weights[tied] = g[tied, :k]
+    total[tied] = weights[tied].sum(axis=1)
+    return index[:, :k], weights / total[:, None]
+
+
+# --- the measured region and its triangulation ------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Region:
+    """The spherical convex hull of the measured set, triangulated.
+
+    vertices (N, 3); triangles (F, 3) vertex indices; inverse (F, 3, 3), the inverse of the
+    matrix whose columns are a triangle's vertices (its barycentric coordinates of q are
+    inverse @ q, up to scale); neighbours (F, 3), the triangle across the edge opposite each
+    vertex or -1 on the boundary; planes (C, 3), outward normals of the bounding planes through
+    the origin (q is outside when any n . q > 0); edges (E, 2), the boundary arcs; corners, the
+    vertices a clamped query may land on.
+    """
+
+    vertices: FloatArray
+    triangles: IntArray
+    inverse: FloatArray
+    neighbours: IntArray
+    planes: FloatArray
+    edges: IntArray
+    corners: IntArray
+
+    @property
+    def solid(self) -> bool:
+        return self.triangles.shape[0] > 0
+
+    @staticmethod
+    def build(points: FloatArray) -> _Region:
+        count = len(points)
+        if count >= 3:
+            s = np.linalg.svd(points, compute_uv=False)
+            if s[2] > 1e-9 * s[0]:
+                try:
+                    hull = ConvexHull(np.vstack([points, np.zeros((1, 3))]))
+                except QhullError:
+                    hull = None
+                if hull is not None:
+                    region = _Region._from_hull(points, hull)
+                    if region.solid:
+                        return region
+        return _Region._arcs(points)
+
+    @staticmethod
+    def _from_hull(points: FloatArray, hull: Any) -> _Region:
+        count = len(points)
+        simplices = hull.simplices.astype(np.int64)
+        offset = -hull.equations[:, 3]  # distance of each face plane from the origin
+        keep = (offset > _PLANE) & ~np.any(simplices == count, axis=1)
+        triangles = simplices[keep]
+        renumber = np.full(len(simplices), -1, dtype=np.int64)
+        renumber[keep] = np.arange(len(triangles))
+        neighbours = renumber[hull.neighbors[keep]]
+        inverse = np.linalg.inv(points[triangles].transpose(0, 2, 1))
+        t, i = np.nonzero(neighbours < 0)
+        edges = np.stack([triangles[t, (i + 1) % 3], triangles[t, (i + 2) % 3]], axis=1)
+        return _Region(
+            vertices=points,
+            triangles=triangles,
+            inverse=np.ascontiguousarray(inverse),
+            neighbours=np.ascontiguousarray(neighbours),
+            planes=np.ascontiguousarray(hull.equations[~keep, :3]),
+            edges=edges.astype(np.int64).reshape(-1, 2),
+            corners=np.unique(edges).astype(np.int64),
+        )
+
+    @staticmethod
+    def _arcs(points: FloatArray) -> _Region:
+        # One, two or more directions on a single great circle: the region is the shortest arc
+        # system through them (consecutive directions along the circle, the largest gap left out
+        # when it exceeds a half turn) or, for one direction or an antipodal pair, the points.
+        edges = np.zeros((0, 2), dtype=np.int64)
+        if len(points) >= 2:
+            _, s, vt = np.linalg.svd(points)
+            if s[1] > 1e-9 * s[0]:
+                normal = vt[2]
+                u = points[0]
+                v = np.cross(normal, u)
+                angle = np.arctan2(points @ v, points @ u)
+                order = np.argsort(angle)
+                gaps = np.diff(np.append(angle[order], angle[order[0]] + 2.0 * np.pi))
+                pairs = np.stack([order, np.roll(order, -1)], axis=1)
+                use = gaps < np.pi - 1e-9
+                if gaps.max() >= np.pi - 1e-9:
+                    use[np.argmax(gaps)] = False
+                edges = pairs[use].astype(np.int64).reshape(-1, 2)
+        corners = np.arange(len(points), dtype=np.int64)
+        return _Region(
+            vertices=points,
+            triangles=np.zeros((0, 3), dtype=np.int64),
+            inverse=np.zeros((0, 3, 3)),
+            neighbours=np.zeros((0, 3), dtype=np.int64),
+            planes=np.zeros((0, 3)),
+            edges=edges,
+            corners=corners,
+        )
+
+    def outside(self, queries: FloatArray) -> NDArray[np.bool_]:
+        """Queries (Q, 3) outside the region; shape (Q,), bool."""
+        if self.solid:
+            out = np.zeros(len(queries), dtype=bool)
+            _outside_kernel(queries, self.planes, out)
+            return out
+        _, _, gap = self._clamp(queries, np.arange(len(queries), dtype=np.int64))
+        return gap > _DUPLICATE
+
+    def _clamp(
+        self, queries: FloatArray, rows: IntArray
+    ) -> tuple[IntArray, FloatArray, FloatArray]:
+        index = np.zeros((len(queries), 3), dtype=np.int64)
+        weights = np.zeros((len(queries), 3))
+        gap = np.zeros(len(queries))
+        cross = np.cross(self.vertices[self.edges[:, 0]], self.vertices[self.edges[:, 1]])
+        normal = cross / np.linalg.norm(cross, axis=1, keepdims=True)
+        _clamp_kernel(
+            queries,
+            rows,
+            self.vertices,
+            self.edges,
+            np.ascontiguousarray(normal),
+            self.corners,
+            index,
+            weights,
+            gap,
+        )
+        return index, weights, gap
+
+    def barycentric(self, queries: FloatArray, *, clamp: bool) -> DirectionWeights:
+        q_count = len(queries)
+        if self.solid:
+            index = np.zeros((q_count, 3), dtype=np.int64)
+            weights = np.zeros((q_count, 3))
+            outside = np.zeros(q_count, dtype=bool)
+            _locate_kernel(
+                queries,
+                self.planes,
+                self.triangles,
+                self.inverse,
+                self.neighbours,
+                outside,
+                index,
+                weights,
+            )
+            rows = np.flatnonzero(outside).astype(np.int64)
+            if clamp and rows.size:
+                near, w, _ = self._clamp(queries, rows)
+                index[rows], weights[rows] = near[rows], w[rows]
+            elif rows.size:
+                index[rows] = self.edges[0, 0] if len(self.edges) else 0
+        else:
+            index, weights, gap = self._clamp(queries, np.arange(q_count, dtype=np.int64))
+            outside = gap > _DUPLICATE
+        if not clamp:
+            weights[outside] = 0.0
+        return DirectionWeights(index, weights, outside)
+
+
+@numba.njit(cache=True, parallel=True)
+def _outside_kernel(queries: FloatArray, planes: FloatArray, outside: NDArray[np.bool_]) -> None:
+    for row in numba.prange(queries.shape[0]):
+        x, y, z = queries[row, 0], queries[row, 1], queries[row, 2]
+        for c in range(planes.shape[0]):
+            if planes[c, 0] * x + planes[c, 1] * y + planes[c, 2] * z > _PLANE:
+                outside[row] = True
+                break
+
+
+@numba.njit(cache=True, parallel=True)
+def _locate_kernel(
+    queries: FloatArray,
+    planes: FloatArray,
+    triangles: IntArray,
+    inverse: FloatArray,
+    neighbours: IntArray,
+    outside: NDArray[np.bool_],
+    index: IntArray,
+    weights: FloatArray,
+) -> None:
+    # Point location by a visibility walk: from the last triangle of the block (the first query
+    # of a block searches them all), cross the edge of the most negative coordinate until none
+    # is negative; a walk that leaves the triangulation or runs too long falls back to a search
+    # of every triangle for the one the query is least outside of.
+    q_count = queries.shape[0]
+    f_count = triangles.shape[0]
+    for block in numba.prange((q_count + _BLOCK - 1) // _BLOCK):
+        current = -1
+        for row in range(block * _BLOCK, min((block + 1) * _BLOCK, q_count)):
+            x, y, z = queries[row, 0], queries[row, 1], queries[row, 2]
+            out = False
+            for c in range(planes.shape[0]):
+                if planes[c, 0] * x + planes[c, 1] * y + planes[c, 2] * z > _PLANE:
+                    out = True
+                    break
+            if out:
+                outside[row] = True
+                continue
+            t = current
+            found = False
+            if t >= 0:
+                for _ in range(f_count + 3):
+                    worst = 0
+                    low = np.inf
+                    size = 0.0
+                    for i in range(3):
+                        lam = inverse[t, i, 0] * x + inverse[t, i, 1] * y + inverse[t, i, 2] * z
+                        size += abs(lam)
+                        if lam < low:
+                            low = lam
+                            worst = i
+                    if low >= -_LAMBDA * size:
+                        found = True
+                        break
+                    t = neighbours[t, worst]
+                    if t < 0:
+                        break
+            if not found:
+                best = -np.inf
+                t = 0
+                for f in range(f_count):
+                    low = np.inf
+                    size = 0.0
+                    for i in range(3):
+                        lam = inverse[f, i, 0] * x + inverse[f, i, 1] * y + inverse[f, i, 2] * z
+                        size += abs(lam)
+                        low = min(low, lam)
+                    score = low / size if size > 0.0 else -np.inf
+                    if score > best:
+                        best = score
+                        t = f
+            total = 0.0
+            for i in range(3):
+                lam = inverse[t, i, 0] * x + inverse[t, i, 1] * y + inverse[t, i, 2] * z
+                lam = max(lam, 0.0)
+                weights[row, i] = lam
+                total += lam
+            for i in range(3):
+                index[row, i] = triangles[t, i]
+                weights[row, i] = weights[row, i] / total if total > 0.0 else 1.0 / 3.0
+            current = t
+
+
+@numba.njit(cache=True, parallel=True)
+def _clamp_kernel(
+    queries: FloatArray,
+    rows: IntArray,
+    vertices: FloatArray,
+    edges: IntArray,
+    normals: FloatArray,
+    corners: IntArray,
+    index: IntArray,
+    weights: FloatArray,
+    gap: FloatArray,
+) -> None:
+    # Nearest point of the boundary arcs and corners to each query. On the great circle of arc
+    # (a, b) with unit normal n the nearest point is p = normalize(q - (q . n) n); it lies on the
+    # arc when (a x p) . n and (p x b) . n are both >= 0, and those are its coordinates in a and b
+    # times |a x b|: the planar barycentric coordinates on the chord, as inside the triangles.
+    for r in numba.prange(rows.shape[0]):
+        row = rows[r]
+        x, y, z = queries[row, 0], queries[row, 1], queries[row, 2]
+        best = -np.inf
+        first = corners[0]
+        second = corners[0]
+        wa = 1.0
+        px, py, pz = vertices[first, 0], vertices[first, 1], vertices[first, 2]
+        for c in range(corners.shape[0]):
+            v = corners[c]
+            dot = x * vertices[v, 0] + y * vertices[v, 1] + z * vertices[v, 2]
+            if dot > best:
+                best = dot
+                first = v
+                second = v
+                wa = 1.0
+                px, py, pz = vertices[v, 0], vertices[v, 1], vertices[v, 2]
+        for e in range(edges.shape[0]):
+            nx, ny, nz = normals[e, 0], normals[e, 1], normals[e, 2]
+            h = x * nx + y * ny + z * nz
+            sx, sy, sz = x - h * nx, y - h * ny, z - h * nz
+            norm = math.sqrt(sx * sx + sy * sy + sz * sz)
+            if norm <= best or norm < 1e-12:  # q . p = norm: not nearer than the best so far
+                continue
+            sx, sy, sz = sx / norm, sy / norm, sz / norm
+            a, b = edges[e, 0], edges[e, 1]
+            ax, ay, az = vertices[a, 0], vertices[a, 1], vertices[a, 2]
+            bx, by, bz = vertices[b, 0], vertices[b, 1], vertices[b, 2]
+            beta = (ay * sz - az * sy) * nx + (az * sx - ax * sz) * ny + (ax * sy - ay * sx) * nz
+            alpha = (sy * bz - sz * by) * nx + (sz * bx - sx * bz) * ny + (sx * by - sy * bx) * nz
+            if alpha < 0.0 or beta < 0.0 or alpha + beta <= 0.0:
+                continue
+            best = norm
+            first = a
+            second = b
+            wa = alpha / (alpha + beta)
+            px, py, pz = sx, sy, sz
+        index[row, 0] = first
+        index[row, 1] = second
+        index[row, 2] = first
+        weights[row, 0] = wa
+        weights[row, 1] = 1.0 - wa
+        weights[row, 2] = 0.0
+        gap[row] = math.sqrt((x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2)

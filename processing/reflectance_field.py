@@ -1,0 +1,167 @@
+"""Reading a reflectance-field store (the Zarr group of :mod:`rig.field_store`), lazily.
+
+Opening reads only the small arrays (directions, visibility, points, normals) and the
+attributes; radiance is read one camera's slab (T, P, 3) at a time, when relighting needs it,
+and the most recently used slabs stay in memory.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import zarr
+from numpy.typing import NDArray
+
+from rig.camera_model import PinholeCamera
+from rig.errors import DatasetError, InputError
+from rig.field_store import FIELD_SCHEMA_VERSION
+
+__all__ = ["ReflectanceField"]
+
+#: Camera slabs kept in memory by default (a 250k-point, T = 30 float16 slab is 45 MB).
+CACHED_SLABS = 8
+
+
+@dataclass(eq=False)
+class ReflectanceField:
+    """A measured or simulated reflectance field, opened from its store.
+
+    Attributes
+    ----------
+    path : Path of the store
+    light_directions : ndarray, shape (T, 3), float64, unit vectors toward the lights
+    camera_directions : ndarray, shape (S, 3), float64, unit vectors toward the cameras
+    cameras : list of PinholeCamera, length S
+    visibility : ndarray, shape (S, P), bool, camera s sees sample p
+    points, normals : ndarray, shape (P, 3), float32, or None (pixel fields may have neither)
+    image_shape : (height, width) for a field of the pixels of one view, None for points
+    light_model, provenance : dict, the store's attributes
+    """
+
+    path: Path
+    light_directions: NDArray[np.float64]
+    camera_directions: NDArray[np.float64]
+    cameras: list[PinholeCamera]
+    visibility: NDArray[np.bool_]
+    points: NDArray[np.float32] | None
+    normals: NDArray[np.float32] | None
+    image_shape: tuple[int, int] | None
+    light_model: dict[str, Any]
+    provenance: dict[str, Any]
+    radiance: Any = field(repr=False)  # the zarr array (S, T, P, 3), read on demand
+    cached_slabs: int = CACHED_SLABS
+    _slabs: OrderedDict[int, NDArray[np.floating]] = field(default_factory=OrderedDict, repr=False)
+
+    @classmethod
+    def open(
+        cls, path: str | os.PathLike[str], cached_slabs: int = CACHED_SLABS
+    ) -> ReflectanceField:
+        """Open the store at ``path``; DatasetError names what is missing or inconsistent."""
+        where = Path(path)
+        if not where.exists():
+            raise DatasetError(f"{where}: no such field store")
+        try:
+            group: Any = zarr.open_group(str(where), mode="r")
+        except Exception as error:  # zarr raises several types for non-stores
+            raise DatasetError(f"{where}: not a field store ({error})") from error
+        attrs: dict[str, Any] = dict(group.attrs)
+        version = attrs.get("schema_version")
+        if version != FIELD_SCHEMA_VERSION:
+            raise DatasetError(
+                f"{where}: field schema version {version!r}, this tool reads "
+                f"{FIELD_SCHEMA_VERSION}; rebuild the field with this version"
+            )
+        names = set(group.array_keys())
+        for required in ("radiance", "visibility", "light_directions", "camera_directions"):
+            if required not in names:
+                raise DatasetError(f"{where}: the field store has no {required!r} array")
+        radiance = group["radiance"]
+        if len(radiance.shape) != 4 or radiance.shape[3] != 3:
+            raise DatasetError(f"{where}: radiance must be (S, T, P, 3), got {radiance.shape}")
+        s, t, p, _ = radiance.shape
+        samples = attrs.get("samples", {"kind": "points"})
+        image_shape = None
+        if samples.get("kind") == "pixels":
+            image_shape = (int(samples["height"]), int(samples["width"]))
+        elif samples.get("kind") != "points":
+            raise DatasetError(f"{where}: unknown sample kind {samples.get('kind')!r}")
+
+        def read(name: str, shape: tuple[int, ...]) -> NDArray[Any] | None:
+            if name not in names:
+                return None
+            values = np.asarray(group[name][...])
+            if values.shape != shape:
+                raise DatasetError(f"{where}: {name} has shape {values.shape}, expected {shape}")
+            return values
+
+        light_directions = read("light_directions", (t, 3))
+        camera_directions = read("camera_directions", (s, 3))
+        visibility = read("visibility", (s, p))
+        points, normals = read("points", (p, 3)), read("normals", (p, 3))
+        if image_shape is None and (points is None or normals is None):
+            raise DatasetError(f"{where}: a field of surface points needs points and normals")
+        if image_shape is not None and image_shape[0] * image_shape[1] != p:
+            raise DatasetError(f"{where}: {image_shape} pixels do not match P = {p}")
+        try:
+            cameras = [PinholeCamera(**c) for c in attrs["cameras"]]
+        except (KeyError, TypeError, InputError) as error:
+            raise DatasetError(f"{where}: bad camera records: {error}") from error
+        if len(cameras) != s:
+            raise DatasetError(f"{where}: {len(cameras)} camera records for S = {s}")
+        assert light_directions is not None and camera_directions is not None
+        assert visibility is not None
+        return cls(
+            path=where,
+            light_directions=light_directions.astype(np.float64),
+            camera_directions=camera_directions.astype(np.float64),
+            cameras=cameras,
+            visibility=visibility.astype(bool),
+            points=None if points is None else points.astype(np.float32),
+            normals=None if normals is None else normals.astype(np.float32),
+            image_shape=image_shape,
+            light_model=dict(attrs.get("light_model", {})),
+            provenance=dict(attrs.get("provenance", {})),
+            radiance=radiance,
+            cached_slabs=cached_slabs,
+        )
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """(S, T, P): cameras, lights, samples."""
+        s, t, p, _ = self.radiance.shape
+        return int(s), int(t), int(p)
+
+    @property
+    def dtype(self) -> np.dtype[Any]:
+        """Storage dtype of the radiance (float16 or float32)."""
+        return np.dtype(self.radiance.dtype)
+
+    @property
+    def sample_kind(self) -> str:
+        """ "points" (3D surface samples) or "pixels" (one fixed view)."""
+        return "points" if self.image_shape is None else "pixels"
+
+    def camera_slab(self, camera: int) -> NDArray[np.floating]:
+        """Radiance (T, P, 3) of every sample under every light, seen by ``camera``.
+
+        Read from the store on first use and kept among the ``cached_slabs`` most recent.
+        """
+        s = self.shape[0]
+        if not 0 <= camera < s:
+            raise InputError(f"camera index {camera} outside 0..{s - 1} of {self.path}")
+        slab = self._slabs.pop(camera, None)
+        if slab is None:
+            slab = np.asarray(self.radiance[camera])
+        self._slabs[camera] = slab
+        while len(self._slabs) > max(self.cached_slabs, 1):
+            self._slabs.popitem(last=False)
+        return slab
+
+    def load(self) -> NDArray[np.floating]:
+        """The whole radiance array (S, T, P, 3) in memory, in its storage dtype."""
+        return np.asarray(self.radiance[...])

@@ -1,0 +1,80 @@
+"""Writing relit images and sequences: linear EXR, tone-mapped PNG, GIF and MP4.
+
+One exposure serves a whole sequence (chosen on its first frame), so frames do not flicker.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import imageio.v2 as imageio
+import numpy as np
+from numpy.typing import NDArray
+
+from processing.panorama import write_exr_rgba
+from render.overlay import write_png
+from render.tonemap import auto_exposure, to_uint8, tone_map
+from rig.atomic import atomic_path
+from rig.errors import InputError
+
+__all__ = [
+    "IMAGE_SUFFIXES",
+    "SEQUENCE_SUFFIXES",
+    "display_picture",
+    "write_image",
+    "write_sequence",
+]
+
+IMAGE_SUFFIXES = (".exr", ".png")
+SEQUENCE_SUFFIXES = (".gif", ".mp4")
+
+
+def display_picture(
+    rgb: NDArray[np.floating], coverage: NDArray[np.bool_], exposure: float | None = None
+) -> NDArray[np.uint8]:
+    """Tone-mapped 8-bit sRGB picture (H, W, 3) of a linear image; exposure from the object."""
+    if exposure is None:
+        covered = np.asarray(rgb)[coverage]
+        exposure = auto_exposure(covered) if covered.size else 1.0
+    return to_uint8(tone_map(rgb, exposure=exposure))
+
+
+def write_image(
+    path: str | os.PathLike[str],
+    rgb: NDArray[np.floating],
+    coverage: NDArray[np.bool_],
+    exposure: float | None = None,
+) -> None:
+    """Write linear RGB + coverage alpha as OpenEXR, or a tone-mapped PNG, by suffix."""
+    target = Path(path)
+    suffix = target.suffix.lower()
+    if suffix == ".exr":
+        write_exr_rgba(target, np.asarray(rgb, np.float32), coverage.astype(np.float32))
+    elif suffix == ".png":
+        write_png(target, display_picture(rgb, coverage, exposure))
+    else:
+        raise InputError(f"{target}: write an image as {' or '.join(IMAGE_SUFFIXES)}")
+
+
+def write_sequence(
+    path: str | os.PathLike[str], frames: Sequence[NDArray[np.uint8]], fps: float = 12.0
+) -> None:
+    """Write 8-bit RGB frames (H, W, 3) as an animated GIF (looping) or an H.264 MP4."""
+    target = Path(path)
+    suffix = target.suffix.lower()
+    if suffix not in SEQUENCE_SUFFIXES:
+        raise InputError(f"{target}: write a sequence as {' or '.join(SEQUENCE_SUFFIXES)}")
+    if not frames:
+        raise InputError(f"{target}: a sequence needs at least one frame")
+    with atomic_path(target) as temporary:
+        if suffix == ".gif":
+            imageio.mimwrite(temporary, list[Any](frames), duration=1000.0 / fps, loop=0)
+        else:
+            # H.264 wants even sizes; pad by one black row/column where needed.
+            height, width = frames[0].shape[:2]
+            pad = ((0, height % 2), (0, width % 2), (0, 0))
+            padded: list[Any] = [np.pad(frame, pad) for frame in frames]
+            imageio.mimwrite(temporary, padded, fps=fps, macro_block_size=1, format="FFMPEG")

@@ -1,0 +1,272 @@
+"""Relighting a reflectance field: the paper's eq. 3, camera blending, and the sum over slabs.
+
+A field F (S, T, P, 3) holds the radiance of every sample p seen from camera s under a
+directional light t of unit irradiance. Light is linear, so under lights of irradiance E_k
+from directions l_k (a :class:`processing.lights.LightSet`) and for a view e
+
+    L_p = sum_s w(e, s, p) sum_t W_t F[s, t, p],    W_t = sum_k E_k w(l_k, t)        (eq. 3)
+
+with w(l, t) the interpolation weights of direction l over the measured lights and w(e, s, p)
+those of the view direction from p over the measured cameras, restricted to the cameras that see
+p and renormalised. A sample no camera sees is a hole: reported, never silently black.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from processing.interpolation import interpolation_weights
+from processing.panorama import downsample_panorama
+from processing.reflectance_field import ReflectanceField
+from render.light_weights import LightWeights
+from rig.camera_model import PinholeCamera
+from rig.directions import panorama_directions, panorama_solid_angles
+from rig.errors import InputError
+
+__all__ = ["ViewBlend", "blend_cameras", "relight", "relight_pixels_literal"]
+
+#: float16 bit pattern -> float32, so the numba kernels read half-precision fields directly.
+_HALF_TO_FLOAT = (
+    np.arange(65536, dtype=np.uint32).astype(np.uint16).view(np.float16).astype(np.float32)
+)
+#: Samples per block of the relighting kernel (one block's rows of every light stay in cache).
+BLOCK = 2048
+
+
+@dataclass(frozen=True)
+class ViewBlend:
+    """Per-sample camera weights of one view.
+
+    Attributes
+    ----------
+    cameras : ndarray, shape (C,), int64, the measured cameras the view uses
+    weights : ndarray, shape (C, P), float32, weight of each used camera for each sample
+        (rows of a sample sum to 1, or 0 for holes and for samples not needed)
+    holes : ndarray, shape (P,), bool, needed samples that no chosen camera sees
+    """
+
+    cameras: NDArray[np.int64]
+    weights: NDArray[np.float32]
+    holes: NDArray[np.bool_]
+
+
+def blend_cameras(
+    field: ReflectanceField,
+    camera: PinholeCamera,
+    method: str = "paper",
+    *,
+    n: int = 3,
+    needed: NDArray[np.bool_] | None = None,
+) -> ViewBlend:
+    """Camera weights of every needed sample for the view of ``camera``.
+
+    The view direction is taken per sample (from the sample toward the eye). Cameras that do
+    not see a sample are dropped and the rest renormalised; a sample none of the chosen cameras
+    sees takes the nearest camera that does, and one that no camera sees is a hole.
+
+    Parameters
+    ----------
+    field : ReflectanceField
+    camera : PinholeCamera, the wanted view
+    method, n : interpolation over the measured cameras (n nearest for ``paper``)
+    needed : ndarray, shape (P,), bool, optional; samples to relight (default all)
+    """
+    _, _, p_count = field.shape
+    if field.sample_kind == "pixels":
+        # One fixed view: nothing to blend; the wanted view must be that one.
+        if not np.allclose(camera.direction, field.camera_directions[0], atol=1e-6):
+            raise InputError(
+                f"{field.path} holds the pixels of one view "
+                f"({field.cameras[0].azimuth_deg:g}, {field.cameras[0].inclination_deg:g}); it "
+                "cannot be seen from another"
+            )
+        keep = np.ones(p_count, dtype=bool) if needed is None else needed
+        return ViewBlend(
+            np.zeros(1, dtype=np.int64),
+            keep.astype(np.float32)[None, :],
+            keep & ~field.visibility[0],
+        )
+    assert field.points is not None
+    mask = np.ones(p_count, dtype=bool) if needed is None else np.asarray(needed, dtype=bool)
+    index = np.flatnonzero(mask)
+    towards = camera.position - field.points[index].astype(np.float64)
+    towards /= np.linalg.norm(towards, axis=1, keepdims=True)
+    chosen = interpolation_weights(field.camera_directions, towards, method, m=n, policy="clamp")
+    indices = chosen.indices.copy()
+    weights = chosen.weights * field.visibility[indices, index[:, None]]
+    total = weights.sum(axis=1)
+    unseen = np.flatnonzero(total <= 0)
+    if unseen.size:
+        # None of the chosen cameras sees these samples: fall back to the nearest camera that
+        # does (by angle); only samples that no camera sees are holes.
+        order = np.argsort(-(towards[unseen] @ field.camera_directions.T), axis=1)
+        seen = field.visibility[order, index[unseen, None]]
+        indices[unseen, 0] = order[np.arange(len(unseen)), np.argmax(seen, axis=1)]
+        weights[unseen, 0] = total[unseen] = seen.any(axis=1)
+    holes = np.zeros(p_count, dtype=bool)
+    holes[index[total <= 0]] = True
+    weights = np.divide(
+        weights, total[:, None], out=np.zeros_like(weights), where=total[:, None] > 0
+    )
+    live = weights > 0
+    used = np.unique(indices[live])
+    per_camera = np.zeros((len(used), p_count), dtype=np.float32)
+    rows = np.broadcast_to(index[:, None], indices.shape)
+    np.add.at(
+        per_camera,
+        (np.searchsorted(used, indices[live]), rows[live]),
+        weights[live].astype(np.float32),
+    )
+    return ViewBlend(used.astype(np.int64), per_camera, holes)
+
+
+def relight(
+    field: ReflectanceField, lighting: LightWeights, blend: ViewBlend
+) -> NDArray[np.float32]:
+    """Radiance (P, 3), float32, of every sample: eq. 3 summed over the blend's camera slabs.
+
+    Samples with no weight (holes, samples not needed) are 0; see ``blend.holes``.
+    """
+    _, t_count, p_count = field.shape
+    if lighting.rgb.shape[1:] != (t_count, 3):
+        raise InputError(
+            f"light weights are for {lighting.rgb.shape[1]} lights, {field.path} has {t_count}"
+        )
+    rows = lighting.sample_rows
+    if rows is None:
+        rows = np.zeros(p_count, dtype=np.int64)
+    elif rows.shape != (p_count,):
+        raise InputError(f"light weights are for {rows.shape[0]} samples, the field has {p_count}")
+    out = np.zeros((p_count, 3), dtype=np.float32)
+    for row, camera in enumerate(blend.cameras):
+        slab = field.camera_slab(int(camera))
+        weight = blend.weights[row]
+        if slab.dtype == np.float16:
+            _accumulate_half(slab.view(np.uint16), _HALF_TO_FLOAT, lighting.rgb, rows, weight, out)
+        else:
+            _accumulate(slab.astype(np.float32, copy=False), lighting.rgb, rows, weight, out)
+    return out
+
+
+def relight_pixels_literal(
+    field: ReflectanceField,
+    rgb: NDArray[np.floating],
+    blend: ViewBlend,
+    method: str = "paper",
+    *,
+    m: int = 3,
+    policy: str = "clamp",
+    grid_height: int | None = None,
+) -> NDArray[np.float32]:
+    """Paper eq. 2 as written: for each sample, the sum over every panorama pixel in the
+    hemisphere of its normal of L dw times the interpolated field. The slow reference
+    (P x pixels x m operations) that :func:`render.light_weights.pixel_light_weights`
+    rearranges; use small P or ``grid_height``.
+
+    Returns
+    -------
+    ndarray, shape (P, 3), float32 (0 where the blend gives no weight)
+    """
+    if field.normals is None:
+        raise InputError(f"{field.path} has no normals: eq. 2 needs each sample's hemisphere")
+    image = np.asarray(rgb, dtype=np.float32)
+    if grid_height is not None and grid_height < image.shape[0]:
+        image = downsample_panorama(image, grid_height)
+    height, width = image.shape[:2]
+    directions = panorama_directions(height, width).reshape(-1, 3)
+    energy = (image * panorama_solid_angles(height, width)[:, :, None]).reshape(-1, 3)
+    weights = interpolation_weights(field.light_directions, directions, method, m=m, policy=policy)
+    _, t_count, p_count = field.shape
+    needed = np.flatnonzero(blend.weights.sum(axis=0) > 0)
+    blended = np.zeros((len(needed), t_count, 3))
+    for row, camera in enumerate(blend.cameras):
+        slab = field.camera_slab(int(camera))[:, needed].astype(np.float64)
+        blended += blend.weights[row, needed][:, None, None] * slab.transpose(1, 0, 2)
+    out = np.zeros((p_count, 3), dtype=np.float32)
+    result = np.zeros((len(needed), 3))
+    _literal_eq2(
+        field.normals[needed].astype(np.float64),
+        directions,
+        energy.astype(np.float64),
+        weights.indices,
+        weights.weights,
+        blended,
+        result,
+    )
+    out[needed] = result
+    return out
+
+
+@numba.njit(cache=True, parallel=True)
+def _literal_eq2(
+    normals: NDArray[np.float64],
+    directions: NDArray[np.float64],
+    energy: NDArray[np.float64],
+    indices: NDArray[np.int64],
+    weights: NDArray[np.float64],
+    blended: NDArray[np.float64],
+    out: NDArray[np.float64],
+) -> None:
+    for p in numba.prange(normals.shape[0]):
+        for q in range(directions.shape[0]):
+            if (
+                normals[p, 0] * directions[q, 0]
+                + normals[p, 1] * directions[q, 1]
+                + normals[p, 2] * directions[q, 2]
+                <= 0.0
+            ):
+                continue
+            for j in range(indices.shape[1]):
+                w = weights[q, j]
+                if w != 0.0:
+                    t = indices[q, j]
+                    for c in range(3):
+                        out[p, c] += energy[q, c] * w * blended[p, t, c]
+
+
+@numba.njit(cache=True, parallel=True)
+def _accumulate(
+    slab: NDArray[np.float32],
+    light: NDArray[np.float32],
+    rows: NDArray[np.int64],
+    weight: NDArray[np.float32],
+    out: NDArray[np.float32],
+) -> None:
+    t_count, p_count = slab.shape[0], slab.shape[1]
+    for block in numba.prange((p_count + BLOCK - 1) // BLOCK):
+        start, stop = block * BLOCK, min((block + 1) * BLOCK, p_count)
+        for t in range(t_count):
+            for p in range(start, stop):
+                w = weight[p]
+                if w != 0.0:
+                    row = rows[p]
+                    out[p, 0] += w * light[row, t, 0] * slab[t, p, 0]
+                    out[p, 1] += w * light[row, t, 1] * slab[t, p, 1]
+                    out[p, 2] += w * light[row, t, 2] * slab[t, p, 2]
+
+
+@numba.njit(cache=True, parallel=True)
+def _accumulate_half(
+    slab: NDArray[np.uint16],
+    table: NDArray[np.float32],
+    light: NDArray[np.float32],
+    rows: NDArray[np.int64],
+    weight: NDArray[np.float32],
+    out: NDArray[np.float32],
+) -> None:
+    # _accumulate over float16 bit patterns (numba has no float16 on the CPU).
+    t_count, p_count = slab.shape[0], slab.shape[1]
+    for block in numba.prange((p_count + BLOCK - 1) // BLOCK):
+        start, stop = block * BLOCK, min((block + 1) * BLOCK, p_count)
+        for t in range(t_count):
+            for p in range(start, stop):
+                w = weight[p]
+                if w != 0.0:
+                    row = rows[p]
+                    out[p, 0] += w * light[row, t, 0] * table[slab[t, p, 0]]
+                    out[p, 1] += w * light[row, t, 1] * table[slab[t, p, 1]]
+                    out[p, 2] += w * light[row, t, 2] * table[slab[t, p, 2]]

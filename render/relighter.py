@@ -1,0 +1,201 @@
+"""The relighting engine: a field, a lighting and a view in, a relit image out.
+
+State lives here (the open field, the current lighting's weights, the current view's camera
+blend and splat plan), so an interactive loop pays only for what changed: a new lighting
+recomputes the light weights and the sum over slabs; a new view recomputes the blend and the
+splat plan too.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from processing.lights import LightSet, disassemble_lights
+from processing.panorama import Panorama, adjust_panorama
+from processing.reflectance_field import ReflectanceField
+from processing.sampling import SamplerName, sample_environment
+from render.light_weights import (
+    LightWeights,
+    pixel_light_weights,
+    projection_light_weights,
+    sampled_light_weights,
+)
+from render.relight import ViewBlend, blend_cameras, relight
+from render.splat import SplatPlan, plan_splats, point_spacing, splat
+from rig.camera_model import PinholeCamera
+from rig.errors import InputError
+
+__all__ = ["SCHEMES", "RelightSettings", "Relighter", "RelitImage", "best_settings"]
+
+SCHEMES = ("sampled", "pixels", "projection")
+
+
+@dataclass(frozen=True)
+class RelightSettings:
+    """How to relight (defaults: the paper's pipeline with our sampling improvements).
+
+    Attributes
+    ----------
+    scheme : "sampled" (eq. 3), "pixels" (eq. 2, rearranged) or "projection" (Voronoi cells
+        of the measured lights)
+    k, sampler, seed, paper : environment sampling (``sampled`` only); ``paper`` diffuses
+        plain pixel luminance as the paper did
+    interpolation, m : over the measured lights; n, view_interpolation : over the cameras
+    policy : light from outside the measured lights' region ("clamp" or "zero")
+    normal_bins, grid_height : ``pixels`` only (see ``pixel_light_weights``)
+    """
+
+    scheme: str = "sampled"
+    k: int = 64
+    sampler: SamplerName = "tmed"
+    seed: int = 0
+    paper: bool = False
+    interpolation: str = "paper"
+    m: int = 3
+    view_interpolation: str = "paper"
+    n: int = 3
+    policy: str = "clamp"
+    normal_bins: int | None = 4096
+    grid_height: int | None = 64
+
+    def __post_init__(self) -> None:
+        if self.scheme not in SCHEMES:
+            raise InputError(f"unknown scheme {self.scheme!r}; use one of {', '.join(SCHEMES)}")
+
+    @classmethod
+    def paper_configuration(cls, k: int = 64) -> RelightSettings:
+        """The paper exactly: TMED on pixel luminance, Voronoi gathering, cosine m x n, eq. 3."""
+        return cls(scheme="sampled", k=k, sampler="tmed", paper=True, interpolation="paper")
+
+
+def best_settings(field_store: ReflectanceField) -> RelightSettings:
+    """The most accurate configuration for a field, as measured on the simulator.
+
+    Every panorama pixel as a light (eq. 2 over each normal's hemisphere) with barycentric
+    interpolation over the measured lights and cameras: the lowest error of the linear schemes
+    in the accuracy study (docs/relighting.md).
+    """
+    del field_store  # every field supports it; kept for the per-sample models to come
+    return RelightSettings(
+        scheme="pixels", interpolation="barycentric", view_interpolation="barycentric"
+    )
+
+
+@dataclass(frozen=True)
+class RelitImage:
+    """One relit view.
+
+    Attributes
+    ----------
+    rgb : ndarray, shape (H, W, 3), float32, linear radiance (0 where uncovered)
+    coverage : ndarray, shape (H, W), bool
+    radiance : ndarray, shape (P, 3), float32, relit samples (0 where not needed or holes)
+    holes : ndarray, shape (P,), bool, needed samples no chosen camera sees
+    outside_fraction : float, share of the light from outside the measured region
+    seconds : dict, time of each stage of this frame
+    """
+
+    rgb: NDArray[np.float32]
+    coverage: NDArray[np.bool_]
+    radiance: NDArray[np.float32]
+    holes: NDArray[np.bool_]
+    outside_fraction: float
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+class Relighter:
+    """Relight one field under changing lightings and views."""
+
+    def __init__(self, field_store: ReflectanceField, settings: RelightSettings | None = None):
+        self.field = field_store
+        self.settings = settings or RelightSettings()
+        self._lighting: LightWeights | None = None
+        self._lights: LightSet | None = None
+        self._view: tuple[PinholeCamera, ViewBlend, SplatPlan | None] | None = None
+        self._spacing: float | None = None
+        if self.settings.scheme == "pixels" and field_store.normals is None:
+            # Pixel fields without normals: eq. 2 without the hemisphere test.
+            self.settings = replace(self.settings, normal_bins=None)
+
+    @property
+    def lights(self) -> LightSet | None:
+        """The sampled lights of the current lighting (``sampled`` scheme only)."""
+        return self._lights
+
+    def set_lighting(
+        self, panorama: Panorama, *, yaw_deg: float = 0.0, exposure: float = 1.0
+    ) -> float:
+        """Compute the light weights of a panorama; returns the seconds it took."""
+        start = time.perf_counter()
+        s = self.settings
+        rgb = adjust_panorama(panorama, yaw_deg=yaw_deg, exposure=exposure).rgb
+        measured = self.field.light_directions
+        if s.scheme == "sampled":
+            samples = sample_environment(rgb, s.k, method=s.sampler, seed=s.seed, paper=s.paper)
+            self._lights = disassemble_lights(rgb, samples.directions)
+            self._lighting = sampled_light_weights(
+                self._lights, measured, s.interpolation, m=s.m, policy=s.policy
+            )
+        elif s.scheme == "pixels":
+            self._lights = None
+            self._lighting = pixel_light_weights(
+                rgb,
+                measured,
+                self.field.normals,
+                s.interpolation,
+                m=s.m,
+                policy=s.policy,
+                normal_bins=s.normal_bins,
+                grid_height=s.grid_height,
+            )
+        else:
+            self._lights = None
+            self._lighting = projection_light_weights(rgb, measured)
+        return time.perf_counter() - start
+
+    def set_view(self, camera: PinholeCamera) -> float:
+        """Compute the camera blend and the splat plan of a view; returns the seconds it took."""
+        start = time.perf_counter()
+        f = self.field
+        plan: SplatPlan | None = None
+        needed = None
+        if f.sample_kind == "points":
+            assert f.points is not None and f.normals is not None
+            if self._spacing is None:
+                self._spacing = point_spacing(f.points)
+            plan = plan_splats(f.points, f.normals, camera, self._spacing)
+            needed = plan.visible
+        blend = blend_cameras(
+            f, camera, self.settings.view_interpolation, n=self.settings.n, needed=needed
+        )
+        self._view = (camera, blend, plan)
+        return time.perf_counter() - start
+
+    def render(self) -> RelitImage:
+        """Relight the current view under the current lighting."""
+        if self._lighting is None or self._view is None:
+            raise InputError("set a lighting and a view before rendering")
+        _, blend, plan = self._view
+        start = time.perf_counter()
+        radiance = relight(self.field, self._lighting, blend)
+        relit = time.perf_counter()
+        if plan is None:
+            assert self.field.image_shape is not None
+            height, width = self.field.image_shape
+            rgb = radiance.reshape(height, width, 3)
+            coverage = (blend.weights.sum(axis=0) > 0).reshape(height, width)
+        else:
+            rgb, coverage = splat(plan, radiance), plan.coverage
+        done = time.perf_counter()
+        return RelitImage(
+            rgb=rgb,
+            coverage=coverage,
+            radiance=radiance,
+            holes=blend.holes,
+            outside_fraction=self._lighting.outside_fraction,
+            seconds={"relight": relit - start, "splat": done - relit},
+        )

@@ -1,0 +1,51 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zarr
+
+from processing.reflectance_field import ReflectanceField
+from rig.errors import DatasetError, InputError
+from sim.field import field_cameras, simulate_field
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("field") / "f.zarr"
+    cameras = field_cameras(3, width=48, height=48)
+    simulate_field(path, "glossy-sphere", lights=4, cameras=cameras, points=2000, dtype="float16")
+    return path
+
+
+def test_open_reads_the_small_arrays_and_slabs_on_demand(store: Path) -> None:
+    field = ReflectanceField.open(store, cached_slabs=2)
+    assert field.shape == (3, 4, 2000) and field.dtype == np.float16
+    assert field.sample_kind == "points" and field.image_shape is None
+    assert field.points is not None and field.points.shape == (2000, 3)
+    assert len(field.cameras) == 3 and field.visibility.shape == (3, 2000)
+    raw = zarr.open_group(str(store), mode="r")["radiance"]
+    np.testing.assert_array_equal(field.camera_slab(1), raw[1])
+    for camera in (0, 2, 1):
+        field.camera_slab(camera)
+    assert list(field._slabs) == [2, 1]  # the two most recent
+    np.testing.assert_array_equal(field.load(), raw[...])
+
+
+def test_missing_or_foreign_stores_are_refused(tmp_path: Path, store: Path) -> None:
+    with pytest.raises(DatasetError, match="no such field store"):
+        ReflectanceField.open(tmp_path / "nothing.zarr")
+    group = zarr.open_group(str(tmp_path / "other.zarr"), mode="w")
+    group.attrs["schema_version"] = 99
+    with pytest.raises(DatasetError, match="schema version 99"):
+        ReflectanceField.open(tmp_path / "other.zarr")
+    group.attrs["schema_version"] = 1
+    with pytest.raises(DatasetError, match="no 'radiance' array"):
+        ReflectanceField.open(tmp_path / "other.zarr")
+
+
+def test_camera_index_is_checked(store: Path) -> None:
+    field = ReflectanceField.open(store)
+    with pytest.raises(InputError, match=r"camera index 3 outside 0\.\.2"):
+        field.camera_slab(3)
