@@ -23,7 +23,7 @@ from rig.field_store import FIELD_SCHEMA_VERSION
 
 __all__ = ["ReflectanceField"]
 
-#: Camera slabs kept in memory by default (a 250k-point, T = 30 float16 slab is 45 MB).
+#: Camera slabs kept in memory by default (a 250k-point, T = 30 slab is 90 MB in float32).
 CACHED_SLABS = 8
 
 
@@ -55,7 +55,7 @@ class ReflectanceField:
     provenance: dict[str, Any]
     radiance: Any = field(repr=False)  # the zarr array (S, T, P, 3), read on demand
     cached_slabs: int = CACHED_SLABS
-    _slabs: OrderedDict[int, NDArray[np.floating]] = field(default_factory=OrderedDict, repr=False)
+    _slabs: OrderedDict[int, NDArray[np.float32]] = field(default_factory=OrderedDict, repr=False)
 
     @classmethod
     def open(
@@ -146,17 +146,18 @@ class ReflectanceField:
         """ "points" (3D surface samples) or "pixels" (one fixed view)."""
         return "points" if self.image_shape is None else "pixels"
 
-    def camera_slab(self, camera: int) -> NDArray[np.floating]:
-        """Radiance (T, P, 3) of every sample under every light, seen by ``camera``.
+    def camera_slab(self, camera: int) -> NDArray[np.float32]:
+        """Radiance (T, P, 3), float32, of every sample under every light, seen by ``camera``.
 
-        Read from the store on first use and kept among the ``cached_slabs`` most recent.
+        Read from the store on first use (float16 stores are widened: the relighting kernels
+        work in float32) and kept among the ``cached_slabs`` most recent.
         """
         s = self.shape[0]
         if not 0 <= camera < s:
             raise InputError(f"camera index {camera} outside 0..{s - 1} of {self.path}")
         slab = self._slabs.pop(camera, None)
         if slab is None:
-            slab = np.asarray(self.radiance[camera])
+            slab = np.asarray(self.radiance[camera], dtype=np.float32)
         self._slabs[camera] = slab
         while len(self._slabs) > max(self.cached_slabs, 1):
             self._slabs.popitem(last=False)

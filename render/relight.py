@@ -27,14 +27,23 @@ from rig.camera_model import PinholeCamera
 from rig.directions import panorama_directions, panorama_solid_angles
 from rig.errors import InputError
 
-__all__ = ["ViewBlend", "blend_cameras", "relight", "relight_pixels_literal"]
+__all__ = [
+    "ViewBlend",
+    "ViewField",
+    "blend_cameras",
+    "blend_field",
+    "relight",
+    "relight_camera",
+    "relight_pixels_literal",
+    "relight_view",
+]
 
 #: float16 bit pattern -> float32, so the numba kernels read half-precision fields directly.
 _HALF_TO_FLOAT = (
     np.arange(65536, dtype=np.uint32).astype(np.uint16).view(np.float16).astype(np.float32)
 )
 #: Samples per block of the relighting kernel (one block's rows of every light stay in cache).
-BLOCK = 2048
+BLOCK = 1024
 
 
 @dataclass(frozen=True)
@@ -124,32 +133,89 @@ def blend_cameras(
     return ViewBlend(used.astype(np.int64), per_camera, holes)
 
 
-def relight(
-    field: ReflectanceField, lighting: LightWeights, blend: ViewBlend
-) -> NDArray[np.float32]:
-    """Radiance (P, 3), float32, of every sample: eq. 3 summed over the blend's camera slabs.
+@dataclass(frozen=True)
+class ViewField:
+    """The field as one view sees it: the camera blend applied once, compacted to the samples
+    the view needs, so every new lighting costs a single pass over (T, Pn, 3).
 
-    Samples with no weight (holes, samples not needed) are 0; see ``blend.holes``.
+    Attributes
+    ----------
+    samples : ndarray, shape (Pn,), int64, the needed samples (those with camera weight)
+    radiance : ndarray, shape (T, Pn, 3), float32, sum_s w(e, s, p) F[s, t, p]
+    sample_count : int, P of the field
     """
+
+    samples: NDArray[np.int64]
+    radiance: NDArray[np.float32]
+    sample_count: int
+
+
+def blend_field(field: ReflectanceField, blend: ViewBlend) -> ViewField:
+    """Apply a view's camera weights to the field's slabs (one pass over each used camera)."""
     _, t_count, p_count = field.shape
+    samples = np.flatnonzero(blend.weights.sum(axis=0) > 0).astype(np.int64)
+    radiance = np.zeros((t_count, len(samples), 3), dtype=np.float32)
+    for row, camera in enumerate(blend.cameras):
+        _blend(field.camera_slab(int(camera)), samples, blend.weights[row], radiance)
+    return ViewField(samples, radiance, p_count)
+
+
+def relight_view(view: ViewField, lighting: LightWeights) -> NDArray[np.float32]:
+    """Radiance (P, 3), float32, of every sample under ``lighting``: sum_t W_t G[t, p].
+
+    Samples outside the view (holes, samples not needed) are 0.
+    """
+    t_count = view.radiance.shape[0]
     if lighting.rgb.shape[1:] != (t_count, 3):
         raise InputError(
-            f"light weights are for {lighting.rgb.shape[1]} lights, {field.path} has {t_count}"
+            f"light weights are for {lighting.rgb.shape[1]} lights, the field has {t_count}"
+        )
+    if lighting.sample_rows is None:
+        rows = np.zeros(len(view.samples), dtype=np.int64)
+    elif lighting.sample_rows.shape == (view.sample_count,):
+        rows = lighting.sample_rows[view.samples]
+    else:
+        raise InputError(
+            f"light weights are for {lighting.sample_rows.shape[0]} samples, the field has "
+            f"{view.sample_count}"
+        )
+    compact = np.zeros((len(view.samples), 3), dtype=np.float32)
+    _relight(view.radiance, lighting.rgb, rows, lighting.sample_rows is None, compact)
+    out = np.zeros((view.sample_count, 3), dtype=np.float32)
+    out[view.samples] = compact
+    return out
+
+
+def relight_camera(
+    field: ReflectanceField, camera: int, lighting: LightWeights
+) -> NDArray[np.float32]:
+    """Radiance (P, 3), float32, of every sample as measured camera ``camera`` sees it.
+
+    Cached per lighting by the :class:`render.relighter.Relighter`, these make a new view
+    under an unchanged lighting a blend of a few (P, 3) arrays.
+    """
+    slab = field.camera_slab(camera)
+    t_count, p_count = slab.shape[:2]
+    if lighting.rgb.shape[1:] != (t_count, 3):
+        raise InputError(
+            f"light weights are for {lighting.rgb.shape[1]} lights, the field has {t_count}"
         )
     rows = lighting.sample_rows
     if rows is None:
         rows = np.zeros(p_count, dtype=np.int64)
-    elif rows.shape != (p_count,):
-        raise InputError(f"light weights are for {rows.shape[0]} samples, the field has {p_count}")
     out = np.zeros((p_count, 3), dtype=np.float32)
-    for row, camera in enumerate(blend.cameras):
-        slab = field.camera_slab(int(camera))
-        weight = blend.weights[row]
-        if slab.dtype == np.float16:
-            _accumulate_half(slab.view(np.uint16), _HALF_TO_FLOAT, lighting.rgb, rows, weight, out)
-        else:
-            _accumulate(slab.astype(np.float32, copy=False), lighting.rgb, rows, weight, out)
+    _relight(slab, lighting.rgb, rows, lighting.sample_rows is None, out)
     return out
+
+
+def relight(
+    field: ReflectanceField, lighting: LightWeights, blend: ViewBlend
+) -> NDArray[np.float32]:
+    """Radiance (P, 3), float32, of every sample for one lighting and view (eq. 3's sums).
+
+    Samples with no weight (holes, samples not needed) are 0; see ``blend.holes``.
+    """
+    return relight_view(blend_field(field, blend), lighting)
 
 
 def relight_pixels_literal(
@@ -180,12 +246,9 @@ def relight_pixels_literal(
     directions = panorama_directions(height, width).reshape(-1, 3)
     energy = (image * panorama_solid_angles(height, width)[:, :, None]).reshape(-1, 3)
     weights = interpolation_weights(field.light_directions, directions, method, m=m, policy=policy)
-    _, t_count, p_count = field.shape
-    needed = np.flatnonzero(blend.weights.sum(axis=0) > 0)
-    blended = np.zeros((len(needed), t_count, 3))
-    for row, camera in enumerate(blend.cameras):
-        slab = field.camera_slab(int(camera))[:, needed].astype(np.float64)
-        blended += blend.weights[row, needed][:, None, None] * slab.transpose(1, 0, 2)
+    view = blend_field(field, blend)
+    needed, p_count = view.samples, view.sample_count
+    blended = np.ascontiguousarray(view.radiance.transpose(1, 0, 2), dtype=np.float64)
     out = np.zeros((p_count, 3), dtype=np.float32)
     result = np.zeros((len(needed), 3))
     _literal_eq2(
@@ -229,44 +292,45 @@ def _literal_eq2(
 
 
 @numba.njit(cache=True, parallel=True)
-def _accumulate(
+def _blend(
     slab: NDArray[np.float32],
-    light: NDArray[np.float32],
-    rows: NDArray[np.int64],
+    samples: NDArray[np.int64],
     weight: NDArray[np.float32],
     out: NDArray[np.float32],
 ) -> None:
-    t_count, p_count = slab.shape[0], slab.shape[1]
-    for block in numba.prange((p_count + BLOCK - 1) // BLOCK):
-        start, stop = block * BLOCK, min((block + 1) * BLOCK, p_count)
-        for t in range(t_count):
-            for p in range(start, stop):
-                w = weight[p]
-                if w != 0.0:
-                    row = rows[p]
-                    out[p, 0] += w * light[row, t, 0] * slab[t, p, 0]
-                    out[p, 1] += w * light[row, t, 1] * slab[t, p, 1]
-                    out[p, 2] += w * light[row, t, 2] * slab[t, p, 2]
+    for t in numba.prange(slab.shape[0]):
+        for j in range(samples.shape[0]):
+            p = samples[j]
+            w = weight[p]
+            if w != 0.0:
+                for c in range(3):
+                    out[t, j, c] += w * slab[t, p, c]
 
 
-@numba.njit(cache=True, parallel=True)
-def _accumulate_half(
-    slab: NDArray[np.uint16],
-    table: NDArray[np.float32],
+@numba.njit(cache=True, parallel=True, fastmath=True)
+def _relight(
+    radiance: NDArray[np.float32],
     light: NDArray[np.float32],
     rows: NDArray[np.int64],
-    weight: NDArray[np.float32],
+    uniform: bool,
     out: NDArray[np.float32],
 ) -> None:
-    # _accumulate over float16 bit patterns (numba has no float16 on the CPU).
-    t_count, p_count = slab.shape[0], slab.shape[1]
-    for block in numba.prange((p_count + BLOCK - 1) // BLOCK):
-        start, stop = block * BLOCK, min((block + 1) * BLOCK, p_count)
+    # Blocks of samples in parallel, lights outer: each block's rows stream once from memory
+    # while its outputs stay in cache. One light row for all samples is the common case
+    # (sampled lights, projection); hoisting it lets the inner loop vectorise.
+    t_count, count = radiance.shape[0], radiance.shape[1]
+    for block in numba.prange((count + BLOCK - 1) // BLOCK):
+        start, stop = block * BLOCK, min((block + 1) * BLOCK, count)
         for t in range(t_count):
-            for p in range(start, stop):
-                w = weight[p]
-                if w != 0.0:
-                    row = rows[p]
-                    out[p, 0] += w * light[row, t, 0] * table[slab[t, p, 0]]
-                    out[p, 1] += w * light[row, t, 1] * table[slab[t, p, 1]]
-                    out[p, 2] += w * light[row, t, 2] * table[slab[t, p, 2]]
+            if uniform:
+                r, g, b = light[0, t, 0], light[0, t, 1], light[0, t, 2]
+                for j in range(start, stop):
+                    out[j, 0] += r * radiance[t, j, 0]
+                    out[j, 1] += g * radiance[t, j, 1]
+                    out[j, 2] += b * radiance[t, j, 2]
+            else:
+                for j in range(start, stop):
+                    row = rows[j]
+                    out[j, 0] += light[row, t, 0] * radiance[t, j, 0]
+                    out[j, 1] += light[row, t, 1] * radiance[t, j, 1]
+                    out[j, 2] += light[row, t, 2] * radiance[t, j, 2]

@@ -1,9 +1,10 @@
 """The relighting engine: a field, a lighting and a view in, a relit image out.
 
 State lives here (the open field, the current lighting's weights, the current view's camera
-blend and splat plan), so an interactive loop pays only for what changed: a new lighting
-recomputes the light weights and the sum over slabs; a new view recomputes the blend and the
-splat plan too.
+blend and splat plan), so an interactive loop pays only for what changed. A new lighting at an
+unchanged view is one pass over the view's blended field (built once per view, :class:`ViewField`);
+a new view under an unchanged lighting blends the per-camera relit samples, each computed once
+per lighting (:func:`relight_camera`).
 """
 
 from __future__ import annotations
@@ -24,7 +25,14 @@ from render.light_weights import (
     projection_light_weights,
     sampled_light_weights,
 )
-from render.relight import ViewBlend, blend_cameras, relight
+from render.relight import (
+    ViewBlend,
+    ViewField,
+    blend_cameras,
+    blend_field,
+    relight_camera,
+    relight_view,
+)
 from render.splat import SplatPlan, plan_splats, point_spacing, splat
 from rig.camera_model import PinholeCamera
 from rig.errors import InputError
@@ -115,7 +123,10 @@ class Relighter:
         self.settings = settings or RelightSettings()
         self._lighting: LightWeights | None = None
         self._lights: LightSet | None = None
-        self._view: tuple[PinholeCamera, ViewBlend, SplatPlan | None] | None = None
+        self._view: tuple[ViewBlend, SplatPlan | None] | None = None
+        self._view_field: ViewField | None = None
+        self._camera_radiance: dict[int, NDArray[np.float32]] = {}
+        self._view_changed = True
         self._spacing: float | None = None
         if self.settings.scheme == "pixels" and field_store.normals is None:
             # Pixel fields without normals: eq. 2 without the hemisphere test.
@@ -155,10 +166,11 @@ class Relighter:
         else:
             self._lights = None
             self._lighting = projection_light_weights(rgb, measured)
+        self._camera_radiance.clear()
         return time.perf_counter() - start
 
     def set_view(self, camera: PinholeCamera) -> float:
-        """Compute the camera blend and the splat plan of a view; returns the seconds it took."""
+        """Blend the cameras for a view and plan its splats; returns the seconds it took."""
         start = time.perf_counter()
         f = self.field
         plan: SplatPlan | None = None
@@ -172,16 +184,24 @@ class Relighter:
         blend = blend_cameras(
             f, camera, self.settings.view_interpolation, n=self.settings.n, needed=needed
         )
-        self._view = (camera, blend, plan)
+        self._view = (blend, plan)
+        self._view_field = None
+        self._view_changed = True
         return time.perf_counter() - start
 
     def render(self) -> RelitImage:
         """Relight the current view under the current lighting."""
         if self._lighting is None or self._view is None:
             raise InputError("set a lighting and a view before rendering")
-        _, blend, plan = self._view
+        blend, plan = self._view
         start = time.perf_counter()
-        radiance = relight(self.field, self._lighting, blend)
+        if self._view_changed:
+            radiance = self._blend_camera_radiance(blend)
+            self._view_changed = False
+        else:
+            if self._view_field is None:
+                self._view_field = blend_field(self.field, blend)
+            radiance = relight_view(self._view_field, self._lighting)
         relit = time.perf_counter()
         if plan is None:
             assert self.field.image_shape is not None
@@ -199,3 +219,13 @@ class Relighter:
             outside_fraction=self._lighting.outside_fraction,
             seconds={"relight": relit - start, "splat": done - relit},
         )
+
+    def _blend_camera_radiance(self, blend: ViewBlend) -> NDArray[np.float32]:
+        assert self._lighting is not None
+        radiance = np.zeros((self.field.shape[2], 3), dtype=np.float32)
+        for row, camera in enumerate(blend.cameras):
+            index = int(camera)
+            if index not in self._camera_radiance:
+                self._camera_radiance[index] = relight_camera(self.field, index, self._lighting)
+            radiance += blend.weights[row][:, None] * self._camera_radiance[index]
+        return radiance

@@ -209,13 +209,14 @@ def _add_demo(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
         "report to the output directory.",
     )
     p.add_argument("-o", "--output", type=Path, default=Path("demo-out"), help="output directory")
+    p.add_argument("--quick", action="store_true", help="small fields (a smoke test)")
     p.set_defaults(handler=_run_demo)
 
 
 def _run_demo(args: argparse.Namespace) -> int:
     from rig.demo import run_demo
 
-    report = run_demo(args.output)
+    report = run_demo(args.output, quick=args.quick)
     print(f"demo written to {args.output}/ (see {report})")
     return 0
 

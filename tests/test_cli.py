@@ -66,13 +66,17 @@ def test_errors_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]
 
 
 def test_demo_writes_pictures_and_report(tmp_path: Path) -> None:
-    assert main(["demo", "-o", str(tmp_path)]) == 0
+    assert main(["demo", "--quick", "-o", str(tmp_path)]) == 0
     report = (tmp_path / "report.md").read_text()
     runs = sorted(p.name for p in (tmp_path / "sampling").iterdir())
     assert "tmed-k64" in runs and "paper-tmed-k64" in runs and len(runs) == 10
     for run in runs:
         assert run in report
         assert (tmp_path / "sampling" / run / "overlay.png").stat().st_size > 0
+    for scene in ("glossy-sphere", "textured-torus"):
+        for picture in ("ground-truth.png", "paper.png", "best.png", "rotating-environment.gif"):
+            assert (tmp_path / "relight" / scene / picture).stat().st_size > 0
+    assert "## Relighting simulated fields" in report
 
 
 @pytest.fixture(scope="module")

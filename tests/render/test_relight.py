@@ -179,3 +179,18 @@ def test_paper_configuration_relights_the_glossy_sphere(
     assert image.coverage.mean() > 0.2 and image.rgb[image.coverage].min() >= 0
     assert image.rgb[image.coverage].mean() > 0
     assert relighter.lights is not None and relighter.lights.k == 32
+
+
+def test_new_view_and_new_lighting_paths_agree(glossy: ReflectanceField) -> None:
+    first, second = (panorama_from_array(_panorama(s), source="test") for s in (7, 8))
+    camera = PinholeCamera(75.0, 45.0, width=64, height=64)
+    relighter = Relighter(glossy, RelightSettings(scheme="projection"))
+    relighter.set_lighting(first)
+    relighter.set_view(camera)
+    relighter.render()  # a new view: per-camera relit samples
+    relighter.set_lighting(second)
+    by_view_field = relighter.render().radiance  # a new lighting: the view's blended field
+    fresh = Relighter(glossy, RelightSettings(scheme="projection"))
+    fresh.set_lighting(second)
+    fresh.set_view(camera)
+    np.testing.assert_allclose(by_view_field, fresh.render().radiance, rtol=1e-5, atol=1e-7)

@@ -1,0 +1,325 @@
+"""Benchmark of relighting: speed of the interactive loop and accuracy against the simulator.
+
+Run: ``python -m bench.relight -o bench-out [--quick]``. Prints tables and writes
+``bench-out/relight.json`` and ``bench-out/relight.png`` (error against time per frame).
+Fields are simulated into ``bench-out/fields/`` once and reused. Timings are medians after
+numba compilation on this machine's cores; compare them as ratios within one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from numpy.typing import NDArray
+
+from processing.panorama import Panorama, panorama_from_array, read_panorama
+from processing.reflectance_field import ReflectanceField
+from render.light_weights import pixel_light_weights
+from render.relight import (
+    blend_cameras,
+    blend_field,
+    relight,
+    relight_pixels_literal,
+    relight_view,
+)
+from render.relighter import Relighter, RelightSettings
+from render.splat import splat
+from rig.camera_model import PinholeCamera
+from sim.field import field_cameras, simulate_field
+from sim.ground_truth import render_environment
+from sim.scenes import build_scene, get_scene
+
+PANORAMAS = Path(__file__).resolve().parents[2] / "shared" / "data" / "panoramas"
+
+
+def _median_ms(run: Callable[[], object], repeats: int) -> float:
+    run()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        run()
+        times.append(time.perf_counter() - start)
+    return float(np.median(times)) * 1e3
+
+
+def _field(out: Path, scene: str, count: int, points: int, size: int, dtype: str) -> Path:
+    path = out / "fields" / f"{scene}-{count}x{count}-{points}-{size}px-{dtype}.zarr"
+    if not path.exists():
+        cameras = field_cameras(count, width=size, height=size)
+        simulate_field(path, scene, lights=count, cameras=cameras, points=points, dtype=dtype)
+    return path
+
+
+def _read_slab(field: ReflectanceField, camera: int) -> NDArray[np.float32]:
+    return np.asarray(field.radiance[camera], dtype=np.float32)
+
+
+def _copy_bandwidth() -> float:
+    """Bytes per second moved by a large copy (read + write)."""
+    source = np.ones(50_000_000, dtype=np.float32)
+    target = np.empty_like(source)
+    ms = _median_ms(lambda: np.copyto(target, source), 5)
+    return 2 * source.nbytes / (ms * 1e-3)
+
+
+def bench_speed(out: Path, points: int, repeats: int, panorama: Panorama) -> dict[str, Any]:
+    """The interactive loop on a 512 x 512 view of an S = T = 30 field."""
+    result: dict[str, Any] = {"points": points, "S": 30, "T": 30, "image": "512x512"}
+    storage = {}
+    for dtype in ("float16", "float32"):
+        start = time.perf_counter()
+        path = _field(out, "glossy-sphere", 30, points, 512, dtype)
+        build = time.perf_counter() - start
+        size = sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
+        field = ReflectanceField.open(path, cached_slabs=1)
+        load = _median_ms(partial(_read_slab, field, 3), 3)
+        storage[dtype] = {"bytes": size, "slab_load_ms": load, "build_s_if_new": build}
+    result["storage"] = storage
+    field = ReflectanceField.open(_field(out, "glossy-sphere", 30, points, 512, "float16"), 30)
+    bandwidth = _copy_bandwidth()
+    result["copy_bandwidth_GBps"] = bandwidth / 1e9
+    camera = PinholeCamera(20.0, 50.0)
+    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    schemes = [
+        _bench_scheme(field, settings, panorama, camera, bandwidth, repeats)
+        for settings in (
+            RelightSettings.paper_configuration(k=64),
+            RelightSettings(scheme="sampled", k=64, interpolation="barycentric"),
+            RelightSettings(scheme="projection"),
+            RelightSettings(scheme="pixels", interpolation="barycentric"),
+        )
+    ]
+    result["schemes"] = schemes
+    result["peak_rss_MB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    result["rss_growth_MB"] = (
+        resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss_before
+    ) / 1024
+    result["slab_MB"] = field.camera_slab(0).nbytes / 1e6
+    result["equation_2_vs_3"] = _bench_equations(out, panorama)
+    return result
+
+
+def _bench_scheme(
+    field: ReflectanceField,
+    settings: RelightSettings,
+    panorama: Panorama,
+    camera: PinholeCamera,
+    bandwidth: float,
+    repeats: int,
+) -> dict[str, Any]:
+    relighter = Relighter(field, settings)
+    lighting_ms = _median_ms(lambda: relighter.set_lighting(panorama, yaw_deg=7.0), repeats)
+    relighter.set_view(camera)
+    relighter.render()
+    relighter.render()  # the second frame at this view builds the view's blended field
+    view_field, lighting, view = relighter._view_field, relighter._lighting, relighter._view
+    assert view_field is not None and lighting is not None and view is not None
+    blend, plan = view
+    assert plan is not None
+    relight_ms = _median_ms(lambda: relight_view(view_field, lighting), repeats)
+    radiance = relight_view(view_field, lighting)
+    splat_ms = _median_ms(lambda: splat(plan, radiance), repeats)
+    floor_ms = 1e3 * view_field.radiance.nbytes / bandwidth
+    yaws = iter(np.linspace(0.0, 360.0, 1000))
+    azimuths = iter(np.linspace(0.0, 360.0, 1000))
+
+    def new_lighting() -> None:
+        relighter.set_lighting(panorama, yaw_deg=float(next(yaws)))
+        relighter.render()
+
+    def new_view() -> None:
+        relighter.set_view(PinholeCamera(float(next(azimuths)), 50.0))
+        relighter.render()
+
+    return {
+        "scheme": settings.scheme,
+        "interpolation": settings.interpolation,
+        "paper": settings.paper,
+        "k": settings.k if settings.scheme == "sampled" else None,
+        "lighting_ms": lighting_ms,
+        "relight_new_lighting_ms": relight_ms,
+        "bandwidth_floor_ms": floor_ms,
+        "floor_ratio": relight_ms / floor_ms,
+        "blend_field_ms": _median_ms(lambda: blend_field(field, blend), 3),
+        "view_setup_ms": _median_ms(lambda: relighter.set_view(camera), 3),
+        "splat_ms": splat_ms,
+        "loop_new_lighting_ms": _median_ms(new_lighting, repeats),
+        "loop_new_view_ms": _median_ms(new_view, repeats),
+        "needed_samples": len(view_field.samples),
+        "cameras_blended": len(blend.cameras),
+    }
+
+
+def _bench_equations(out: Path, panorama: Panorama) -> dict[str, Any]:
+    """Literal eq. 2 against its rearranged form and eq. 3, at equal sizes, in one run."""
+    field = ReflectanceField.open(_field(out, "glossy-sphere", 30, 5000, 128, "float32"))
+    camera = PinholeCamera(20.0, 50.0, width=128, height=128)
+    blend = blend_cameras(field, camera, "barycentric")
+    rgb = panorama.rgb
+    literal_ms = _median_ms(
+        lambda: relight_pixels_literal(field, rgb, blend, "barycentric", grid_height=64), 1
+    )
+
+    def rearranged() -> None:
+        weights = pixel_light_weights(
+            rgb, field.light_directions, field.normals, "barycentric", grid_height=64
+        )
+        relight(field, weights, blend)
+
+    rearranged_ms = _median_ms(rearranged, 3)
+    relighter = Relighter(field, RelightSettings(scheme="sampled", k=64))
+    relighter.set_view(camera)
+    sampled_ms = _median_ms(lambda: (relighter.set_lighting(panorama), relighter.render()), 3)
+    return {
+        "points": 5000,
+        "panorama_directions": 64 * 128,
+        "literal_eq2_ms": literal_ms,
+        "rearranged_eq2_ms": rearranged_ms,
+        "eq3_k64_ms": sampled_ms,
+        "literal_over_rearranged": literal_ms / rearranged_ms,
+        "literal_over_eq3": literal_ms / sampled_ms,
+    }
+
+
+def _relative_rmse(relit: NDArray[np.floating], truth: NDArray[np.floating], mask: Any) -> float:
+    return float(np.sqrt(np.mean((relit[mask] - truth[mask]) ** 2) / np.mean(truth[mask] ** 2)))
+
+
+def _between(cameras: list[PinholeCamera], index: int) -> PinholeCamera:
+    """A view halfway in azimuth between camera ``index`` and its ring neighbour."""
+    ring = sorted(
+        c.azimuth_deg
+        for c in cameras
+        if abs(c.inclination_deg - cameras[index].inclination_deg) < 1e-6
+    )
+    step = 360.0 / len(ring) if len(ring) > 1 else 30.0
+    return replace(cameras[index], azimuth_deg=(cameras[index].azimuth_deg + step / 2) % 360.0)
+
+
+ACCURACY_METHODS: dict[str, RelightSettings] = {
+    "paper (TMED on luminance, K=64, cosine 3x3, eq. 3)": RelightSettings.paper_configuration(64),
+    "sampled K=256, barycentric": RelightSettings(
+        scheme="sampled", k=256, interpolation="barycentric", view_interpolation="barycentric"
+    ),
+    "pixels (eq. 2), barycentric": RelightSettings(
+        scheme="pixels", interpolation="barycentric", view_interpolation="barycentric"
+    ),
+    "projection": RelightSettings(scheme="projection", view_interpolation="barycentric"),
+}
+
+
+def bench_accuracy(out: Path, quick: bool) -> list[dict[str, Any]]:
+    """Relative RMSE and PSNR against the simulator's ground truth over covered pixels."""
+    counts = (30,) if quick else (10, 20, 30)
+    points, size = 20_000, 128
+    rows: list[dict[str, Any]] = []
+    for scene in ("diffuse-sphere", "glossy-sphere", "textured-torus"):
+        samples = build_scene(scene, points)
+        shadows = not get_scene(scene).convex
+        for name in ("courtyard.exr", "studio.exr"):
+            full = read_panorama(PANORAMAS / name)
+            upper = full.rgb.copy()
+            upper[full.rgb.shape[0] // 2 :] = 0.0  # an object on a black stand
+            environments = {"full": full, "upper": panorama_from_array(upper, source=name)}
+            truths: dict[tuple[str, str, float, float], Any] = {}
+            for count in counts:
+                field = ReflectanceField.open(_field(out, scene, count, points, size, "float32"))
+                index = len(field.cameras) // 2
+                views = {
+                    "captured": field.cameras[index],
+                    "between": _between(field.cameras, index),
+                }
+                for env_name, panorama in environments.items():
+                    for view_name, camera in views.items():
+                        key = (env_name, view_name, camera.azimuth_deg, camera.inclination_deg)
+                        if key not in truths:
+                            truths[key] = render_environment(
+                                samples, panorama.rgb, camera, grid_height=32, shadows=shadows
+                            )
+                        truth = truths[key]
+                        for method, settings in ACCURACY_METHODS.items():
+                            relighter = Relighter(field, settings)
+                            relighter.set_lighting(panorama)
+                            relighter.set_view(camera)
+                            start = time.perf_counter()
+                            image = relighter.render()
+                            seconds = time.perf_counter() - start
+                            mask = image.coverage & truth.coverage
+                            error = _relative_rmse(image.rgb, truth.rgb, mask)
+                            peak = float(truth.rgb[mask].max())
+                            mse = float(np.mean((image.rgb[mask] - truth.rgb[mask]) ** 2))
+                            rows.append(
+                                {
+                                    "scene": scene,
+                                    "panorama": name,
+                                    "environment": env_name,
+                                    "S=T": count,
+                                    "view": view_name,
+                                    "method": method,
+                                    "relative_rmse": error,
+                                    "psnr_db": 10 * np.log10(peak**2 / mse) if mse > 0 else None,
+                                    "render_ms": seconds * 1e3,
+                                    "outside_fraction": image.outside_fraction,
+                                }
+                            )
+                            print(
+                                f"{scene:15s} {name:14s} {env_name:5s} S=T={count:<3d} "
+                                f"{view_name:8s} {error:7.2%}  {method}"
+                            )
+    return rows
+
+
+def _chart(results: dict[str, Any], path: Path) -> None:
+    figure, axis = plt.subplots(figsize=(7, 4.5))
+    rows = [r for r in results["accuracy"] if r["S=T"] == 30 and r["environment"] == "upper"]
+    for method in ACCURACY_METHODS:
+        chosen = [r for r in rows if r["method"] == method]
+        axis.scatter(
+            [r["render_ms"] for r in chosen],
+            [100 * r["relative_rmse"] for r in chosen],
+            label=method,
+            s=18,
+        )
+    axis.set_xscale("log")
+    axis.set_xlabel("relight + splat time per frame, ms (128 x 128, 20k points)")
+    axis.set_ylabel("relative RMSE against ground truth, %")
+    axis.set_title("Relighting: error against time (S = T = 30, upper-hemisphere light)")
+    axis.legend(fontsize=7)
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description="Relighting benchmark")
+    parser.add_argument("-o", "--output", type=Path, default=Path("bench-out"))
+    parser.add_argument("--quick", action="store_true", help="fewer points and fields")
+    parser.add_argument("--repeats", type=int, default=7)
+    args = parser.parse_args(argv)
+    args.output.mkdir(parents=True, exist_ok=True)
+    panorama = read_panorama(PANORAMAS / "courtyard.exr")
+    points = 50_000 if args.quick else 250_000
+    speed = bench_speed(args.output, points, args.repeats, panorama)
+    print(json.dumps(speed, indent=2))
+    results = {"speed": speed, "accuracy": bench_accuracy(args.output, args.quick)}
+    (args.output / "relight.json").write_text(json.dumps(results, indent=2) + "\n")
+    _chart(results, args.output / "relight.png")
+    print(f"wrote {args.output / 'relight.json'} and {args.output / 'relight.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
