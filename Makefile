@@ -1,4 +1,5 @@
-# `make test` and `make demo` build .venv from pyproject.toml when it is missing or older than it.
+# `make test` and `make demo` build .venv from pyproject.toml when it is missing or older than it
+# (with the `reference` extra: CI runs the Mitsuba 3 comparison).
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
@@ -9,7 +10,7 @@ BIN := $(VENV)/bin
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,reference]'
 	touch $(STAMP)
 
 lint: $(STAMP)

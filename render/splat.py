@@ -18,13 +18,9 @@ from scipy.spatial import cKDTree
 
 from rig.camera_model import PinholeCamera
 from rig.errors import InputError
-from rig.splat import disk_bounds, zbuffer
+from rig.splat import camera_splats, disk_bounds
 
 __all__ = ["SplatPlan", "plan_splats", "point_spacing", "splat"]
-
-#: Splat radius and depth tolerance, in point spacings (as the simulator's camera).
-SPLAT_RADIUS = 1.0
-DEPTH_TOLERANCE = 2.0
 
 
 @dataclass(frozen=True)
@@ -80,12 +76,9 @@ def plan_splats(
         spacing = point_spacing(cloud)
     if not spacing > 0:
         raise InputError(f"point spacing must be positive, got {spacing}")
-    cols, rows, depth = camera.project(cloud)
-    facing = np.einsum("pk,pk->p", np.asarray(normals, np.float64), camera.position - cloud) > 0
-    depth = np.where(facing, depth, np.inf)  # back faces never occlude or show
-    radius = np.maximum(SPLAT_RADIUS * spacing * camera.focal_px / depth, 0.75)
-    buffer = zbuffer(cols, rows, depth, radius, camera.height, camera.width)
-    tolerance = DEPTH_TOLERANCE * spacing
+    splats = camera_splats(cloud, normals, camera, spacing)
+    cols, rows, depth, radius = splats.cols, splats.rows, splats.depth, splats.radius
+    buffer, tolerance = splats.buffer, splats.tolerance
     counts = np.zeros(camera.height * camera.width + 1, dtype=np.int64)
     _count(cols, rows, depth, radius, buffer, tolerance, counts)
     pixel_start = np.concatenate([[0], np.cumsum(counts[:-1])]).astype(np.int64)

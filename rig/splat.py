@@ -12,12 +12,74 @@ map). Blending keeps every splat within a depth tolerance of the front surface, 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["blend_splats", "depth_at_points", "disk_bounds", "shown_points", "zbuffer"]
+from rig.camera_model import PinholeCamera
+
+__all__ = [
+    "DEPTH_TOLERANCE",
+    "MIN_RADIUS_PX",
+    "SPLAT_RADIUS",
+    "CameraSplats",
+    "blend_splats",
+    "camera_splats",
+    "depth_at_points",
+    "disk_bounds",
+    "shown_points",
+    "zbuffer",
+]
+
+#: Splat radius and depth tolerance in splat sizes; the smallest splat radius, in pixels.
+SPLAT_RADIUS = 1.0
+DEPTH_TOLERANCE = 2.0
+MIN_RADIUS_PX = 0.75
+
+
+@dataclass(frozen=True)
+class CameraSplats:
+    """Points as disks in one camera's image.
+
+    Attributes
+    ----------
+    cols, rows : ndarray, shape (P,), continuous pixel coordinates
+    depth : ndarray, shape (P,), along the viewing axis (inf for back faces: never shown)
+    radius : ndarray, shape (P,), pixels, at least MIN_RADIUS_PX
+    buffer : ndarray, shape (H, W), the z-buffer of the disks
+    tolerance : float, scene units: splats this close behind the front surface blend
+    """
+
+    cols: NDArray[np.float64]
+    rows: NDArray[np.float64]
+    depth: NDArray[np.float64]
+    radius: NDArray[np.float64]
+    buffer: NDArray[np.float64]
+    tolerance: float
+
+
+def camera_splats(
+    points: NDArray[np.floating],
+    normals: NDArray[np.floating],
+    camera: PinholeCamera,
+    spacing: float,
+) -> CameraSplats:
+    """Project points (P, 3) with normals (P, 3) spaced ``spacing`` apart as splats.
+
+    A splat is one point spacing wide, or MIN_RADIUS_PX when points are denser than pixels;
+    the depth tolerance follows the splat's size in the scene (not only the spacing), so the
+    points one small splat covers on a steep surface near the silhouette still blend.
+    """
+    cloud = np.asarray(points, dtype=np.float64)
+    cols, rows, depth = camera.project(cloud)
+    facing = np.einsum("pk,pk->p", np.asarray(normals, np.float64), camera.position - cloud) > 0
+    depth = np.where(facing, depth, np.inf)
+    radius = np.maximum(SPLAT_RADIUS * spacing * camera.focal_px / depth, MIN_RADIUS_PX)
+    buffer = zbuffer(cols, rows, depth, radius, camera.height, camera.width)
+    size = max(SPLAT_RADIUS * spacing, MIN_RADIUS_PX * camera.distance / camera.focal_px)
+    return CameraSplats(cols, rows, depth, radius, buffer, DEPTH_TOLERANCE * size)
 
 
 def zbuffer(

@@ -13,8 +13,9 @@
 Zero when either direction is below the surface. A ``blendbsdf`` averages its two BSDFs, so in
 Mitsuba 3 the sum is a blend of weight 0.5 of ``diffuse`` (reflectance 2 rho_d) and
 ``roughconductor`` (``distribution: ggx``, ``alpha``, ``material: none``,
-``specular_reflectance: 2 F0``), which evaluates the same D and separable Smith G; the Mitsuba
-comparison of the simulator issue is what confirms this mapping.
+``specular_reflectance: 2 F0``), which evaluates the same D and separable Smith G (checked in
+the Mitsuba sources and by the comparison in ``tests/sim/test_mitsuba_reference.py``; the
+reflectances are ``srgb`` textures with ``unbounded: true``, since 2 rho_d may exceed 1).
 """
 
 from __future__ import annotations

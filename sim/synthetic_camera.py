@@ -23,7 +23,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from rig.camera_model import PinholeCamera
 from rig.errors import InputError
-from rig.splat import blend_splats, depth_at_points, shown_points, zbuffer
+from rig.splat import (
+    SPLAT_RADIUS,
+    blend_splats,
+    camera_splats,
+    depth_at_points,
+    shown_points,
+    zbuffer,
+)
 from sim.materials import specular_lobe
 from sim.scenes import SurfaceSamples
 
@@ -38,9 +45,7 @@ __all__ = [
     "shade_points",
 ]
 
-#: Splat radius and depth tolerances, in point spacings.
-SPLAT_RADIUS = 1.0
-DEPTH_TOLERANCE = 2.0
+#: Shadow-map depth bias, in point spacings.
 SHADOW_BIAS = 2.0
 MAX_SHADOW_MAP = 4096
 
@@ -235,34 +240,24 @@ def _check_camera(samples: SurfaceSamples, camera: PinholeCamera) -> None:
         )
 
 
-def _camera_splats(
-    samples: SurfaceSamples, camera: PinholeCamera
-) -> tuple[NDArray[np.float64], ...]:
-    """Image coordinates, depth (inf for back faces), splat radius and z-buffer of the points."""
-    _check_camera(samples, camera)
-    cols, rows, depth = camera.project(samples.points)
-    facing = np.einsum("pk,pk->p", samples.normals, camera.position - samples.points) > 0
-    depth = np.where(facing, depth, np.inf)  # back faces never occlude or show
-    radius = np.maximum(SPLAT_RADIUS * samples.spacing * camera.focal_px / depth, 0.75)
-    buffer = zbuffer(cols, rows, depth, radius, camera.height, camera.width)
-    return cols, rows, depth, radius, buffer
-
-
 def camera_visibility(samples: SurfaceSamples, camera: PinholeCamera) -> NDArray[np.bool_]:
     """Which points (P,) the camera sees: facing it and blending into at least one pixel."""
-    cols, rows, depth, radius, buffer = _camera_splats(samples, camera)
-    return shown_points(cols, rows, depth, radius, buffer, DEPTH_TOLERANCE * samples.spacing)
+    _check_camera(samples, camera)
+    splats = camera_splats(samples.points, samples.normals, camera, samples.spacing)
+    return shown_points(
+        splats.cols, splats.rows, splats.depth, splats.radius, splats.buffer, splats.tolerance
+    )
 
 
 def image_of_points(
     samples: SurfaceSamples, camera: PinholeCamera, radiance: NDArray[np.floating]
 ) -> SyntheticImage:
     """Splat points of known radiance (P, 3) into the camera's image, with visibility."""
-    cols, rows, depth, radius, buffer = _camera_splats(samples, camera)
-    tolerance = DEPTH_TOLERANCE * samples.spacing
-    visible = shown_points(cols, rows, depth, radius, buffer, tolerance)
+    _check_camera(samples, camera)
+    s = camera_splats(samples.points, samples.normals, camera, samples.spacing)
+    visible = shown_points(s.cols, s.rows, s.depth, s.radius, s.buffer, s.tolerance)
     colours = np.asarray(radiance, dtype=np.float64)
-    image, weight = blend_splats(cols, rows, depth, radius, colours, buffer, tolerance)
+    image, weight = blend_splats(s.cols, s.rows, s.depth, s.radius, colours, s.buffer, s.tolerance)
     return SyntheticImage(
         rgb=image,
         coverage=weight > 0,
