@@ -8,6 +8,7 @@ This module and :mod:`rig.demo` are the application layer: they may import every
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -88,7 +89,9 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
         "output: .exr (linear RGB + coverage alpha), .png (tone-mapped), .gif/.mp4 (a sequence: "
         "see --sequence).",
     )
-    p.add_argument("field", type=Path, help="reflectance field store")
+    p.add_argument(
+        "field", type=Path, help="reflectance field store, or an RTI .lp file (or its folder)"
+    )
     p.add_argument("--env", type=Path, required=True, help="panorama file")
     p.add_argument("--scheme", choices=SCHEMES, help="how the panorama lights the field "
                    "(default: the most accurate the field supports)")  # fmt: skip
@@ -116,27 +119,45 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
 
 
 def _run_relight(args: argparse.Namespace) -> int:
-    from dataclasses import replace
-
     from processing.panorama import read_panorama
-    from processing.reflectance_field import ReflectanceField
-    from render.output import (
-        IMAGE_SUFFIXES,
-        SEQUENCE_SUFFIXES,
-        display_picture,
-        write_image,
-        write_sequence,
-    )
-    from render.relighter import Relighter, RelightSettings, best_settings
-    from rig.camera_model import PinholeCamera
+    from render.output import IMAGE_SUFFIXES, SEQUENCE_SUFFIXES
 
     suffix = args.output.suffix.lower()
     if suffix not in IMAGE_SUFFIXES + SEQUENCE_SUFFIXES:
         raise RigError(
             f"{args.output}: write one of {', '.join(IMAGE_SUFFIXES + SEQUENCE_SUFFIXES)}"
         )
-    field = ReflectanceField.open(args.field)
-    panorama = read_panorama(args.env)
+    with contextlib.ExitStack() as stack:
+        field = _open_field_or_rti(args.field, stack)
+        return _relight_field(args, field, read_panorama(args.env), suffix)
+
+
+def _open_field_or_rti(path: Path, stack: contextlib.ExitStack) -> Any:
+    """A field store, or an RTI capture imported into a temporary store for this run."""
+    import tempfile
+
+    from processing.reflectance_field import ReflectanceField
+    from processing.rti import import_rti
+
+    lp = path
+    if path.is_dir() and not (path / "zarr.json").exists():
+        found = sorted(path.glob("*.lp"))
+        if len(found) != 1:
+            raise RigError(f"{path}: neither a field store nor a folder with one .lp file")
+        lp = found[0]
+    if lp.suffix.lower() != ".lp":
+        return ReflectanceField.open(path)
+    scratch = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="rig-rti-")))
+    return import_rti(lp, scratch / "field.zarr", progress=True)
+
+
+def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: str) -> int:
+    from dataclasses import replace
+
+    from render.output import IMAGE_SUFFIXES, display_picture, write_image, write_sequence
+    from render.relighter import Relighter, RelightSettings, best_settings
+    from rig.camera_model import PinholeCamera
+
     if args.paper:
         settings = RelightSettings.paper_configuration(k=args.k)
     else:

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import OpenEXR
 import pytest
 
 from rig.cli import main
@@ -126,3 +127,17 @@ def test_relight_refuses_bad_requests(
     with contextlib.suppress(SystemExit):
         assert main(args + extra) == 2
     assert message in capsys.readouterr().err
+
+
+def test_relight_an_rti_capture_folder(
+    tmp_path: Path, courtyard_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rti = courtyard_path.parents[1] / "rti" / "loewenkopf"
+    out = tmp_path / "lion.exr"
+    assert main(["relight", str(rti), "--env", str(courtyard_path), "-o", str(out)]) == 0
+    with OpenEXR.File(str(out), separate_channels=True) as exr:
+        alpha = exr.channels()["A"].pixels
+    assert alpha.shape == (43, 64) and alpha.min() == 1.0
+    assert main(["relight", str(rti / "dirs.lp"), "--env", str(courtyard_path), "--view", "0,30",
+                 "-o", str(out)]) == 2  # fmt: skip
+    assert "one fixed view" in capsys.readouterr().err
