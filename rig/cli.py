@@ -114,6 +114,12 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     )
     p.add_argument("--frames", type=int, default=36, help="frames of a sequence (default 36)")
     p.add_argument("--fps", type=float, default=12.0, help="frames per second (default 12)")
+    p.add_argument(
+        "--renderer",
+        choices=("splat", "pyvista"),
+        default="splat",
+        help="draw the points with our splatter (default) or VTK (pyvista, .png only)",
+    )
     p.add_argument("-o", "--output", type=Path, required=True, help=".exr/.png/.gif/.mp4")
     p.set_defaults(handler=_run_relight)
 
@@ -182,7 +188,10 @@ def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: 
         relighter.set_lighting(panorama, yaw_deg=args.yaw, exposure=args.exposure)
         relighter.set_view(camera)
         image = relighter.render()
-        write_image(args.output, image.rgb, image.coverage)
+        if args.renderer == "pyvista":
+            _write_pyvista_picture(args, field, camera, image)
+        else:
+            write_image(args.output, image.rgb, image.coverage)
         _report_relit(args, image.holes, image.outside_fraction)
         return 0
     if args.frames < 1:
@@ -209,6 +218,27 @@ def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: 
     write_sequence(args.output, frames, fps=args.fps)
     print(f"{args.frames} frames ({args.sequence}) -> {args.output}")
     return 0
+
+
+def _write_pyvista_picture(args: argparse.Namespace, field: Any, camera: Any, image: Any) -> None:
+    import numpy as np
+
+    from render.overlay import write_png
+    from render.splat import point_spacing
+    from render.tonemap import auto_exposure, to_uint8, tone_map
+    from render.viewer import pyvista_picture
+
+    if field.sample_kind != "points" or args.output.suffix.lower() != ".png":
+        raise RigError("--renderer pyvista draws the points of a point field into a .png")
+    exposure = auto_exposure(image.rgb[image.coverage]) if image.coverage.any() else 1.0
+    colours = to_uint8(tone_map(image.radiance, exposure=exposure))
+    spacing = point_spacing(field.points)
+    write_png(
+        args.output,
+        pyvista_picture(
+            field.points, field.normals, np.ascontiguousarray(colours), camera, spacing
+        ),
+    )
 
 
 def _report_relit(args: argparse.Namespace, holes: Any, outside: float) -> None:

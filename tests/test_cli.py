@@ -141,3 +141,12 @@ def test_relight_an_rti_capture_folder(
     assert main(["relight", str(rti / "dirs.lp"), "--env", str(courtyard_path), "--view", "0,30",
                  "-o", str(out)]) == 2  # fmt: skip
     assert "one fixed view" in capsys.readouterr().err
+
+
+def test_relight_through_vtk(tmp_path: Path, small_field: Path, courtyard_path: Path) -> None:
+    out = tmp_path / "vtk.png"
+    args = ["relight", str(small_field), "--env", str(courtyard_path), "--view", "30,50",
+            "--size", "48x48", "--renderer", "pyvista", "-o", str(out)]  # fmt: skip
+    assert main(args) == 0
+    picture = cv2.imread(str(out))
+    assert picture.shape == (48, 48, 3) and 0.2 < (picture.max(axis=2) > 0).mean() < 0.9
