@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from functools import partial
+from itertools import product
 from pathlib import Path
 from typing import Any
 
@@ -55,11 +56,13 @@ def _median_ms(run: Callable[[], object], repeats: int) -> float:
     return float(np.median(times)) * 1e3
 
 
-def _field(out: Path, scene: str, count: int, points: int, size: int, dtype: str) -> Path:
-    path = out / "fields" / f"{scene}-{count}x{count}-{points}-{size}px-{dtype}.zarr"
+def _field(
+    out: Path, scene: str, cameras: int, lights: int, points: int, size: int, dtype: str
+) -> Path:
+    path = out / "fields" / f"{scene}-S{cameras}-T{lights}-{points}-{size}px-{dtype}.zarr"
     if not path.exists():
-        cameras = field_cameras(count, width=size, height=size)
-        simulate_field(path, scene, lights=count, cameras=cameras, points=points, dtype=dtype)
+        layout = field_cameras(cameras, width=size, height=size)
+        simulate_field(path, scene, lights=lights, cameras=layout, points=points, dtype=dtype)
     return path
 
 
@@ -81,14 +84,14 @@ def bench_speed(out: Path, points: int, repeats: int, panorama: Panorama) -> dic
     storage = {}
     for dtype in ("float16", "float32"):
         start = time.perf_counter()
-        path = _field(out, "glossy-sphere", 30, points, 512, dtype)
+        path = _field(out, "glossy-sphere", 30, 30, points, 512, dtype)
         build = time.perf_counter() - start
         size = sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
         field = ReflectanceField.open(path, cached_slabs=1)
         load = _median_ms(partial(_read_slab, field, 3), 3)
         storage[dtype] = {"bytes": size, "slab_load_ms": load, "build_s_if_new": build}
     result["storage"] = storage
-    field = ReflectanceField.open(_field(out, "glossy-sphere", 30, points, 512, "float16"), 30)
+    field = ReflectanceField.open(_field(out, "glossy-sphere", 30, 30, points, 512, "float16"), 30)
     bandwidth = _copy_bandwidth()
     result["copy_bandwidth_GBps"] = bandwidth / 1e9
     camera = PinholeCamera(20.0, 50.0)
@@ -165,7 +168,7 @@ def _bench_scheme(
 
 def _bench_equations(out: Path, panorama: Panorama) -> dict[str, Any]:
     """Literal eq. 2 against its rearranged form and eq. 3, at equal sizes, in one run."""
-    field = ReflectanceField.open(_field(out, "glossy-sphere", 30, 5000, 128, "float32"))
+    field = ReflectanceField.open(_field(out, "glossy-sphere", 30, 30, 5000, 128, "float32"))
     camera = PinholeCamera(20.0, 50.0, width=128, height=128)
     blend = blend_cameras(field, camera, "barycentric")
     rgb = panorama.rgb
@@ -221,70 +224,95 @@ ACCURACY_METHODS: dict[str, RelightSettings] = {
 }
 
 
+#: (S, T, points, image size): dense fields use fewer points (S = T = 400 would be 8 GB).
+ACCURACY_FIELDS = [
+    (10, 10, 20_000, 128),
+    (20, 20, 20_000, 128),
+    (30, 30, 20_000, 128),
+    (100, 100, 4_000, 96),
+    (30, 400, 4_000, 96),
+]
+
+
+def _score(
+    field: ReflectanceField,
+    settings: RelightSettings,
+    panorama: Panorama,
+    camera: PinholeCamera,
+    truth: Any,
+) -> dict[str, Any]:
+    relighter = Relighter(field, settings)
+    relighter.set_lighting(panorama)
+    relighter.set_view(camera)
+    start = time.perf_counter()
+    image = relighter.render()
+    seconds = time.perf_counter() - start
+    mask = image.coverage & truth.coverage
+    mse = float(np.mean((image.rgb[mask] - truth.rgb[mask]) ** 2))
+    peak = float(truth.rgb[mask].max())
+    return {
+        "relative_rmse": _relative_rmse(image.rgb, truth.rgb, mask),
+        "psnr_db": 10 * np.log10(peak**2 / mse) if mse > 0 else None,
+        "render_ms": seconds * 1e3,
+        "outside_fraction": image.outside_fraction,
+    }
+
+
+def _environments(name: str) -> dict[str, Panorama]:
+    full = read_panorama(PANORAMAS / name)
+    upper = full.rgb.copy()
+    upper[full.rgb.shape[0] // 2 :] = 0.0  # an object on a black stand
+    return {"full": full, "upper": panorama_from_array(upper, source=name)}
+
+
 def bench_accuracy(out: Path, quick: bool) -> list[dict[str, Any]]:
     """Relative RMSE and PSNR against the simulator's ground truth over covered pixels."""
-    counts = (30,) if quick else (10, 20, 30)
-    points, size = 20_000, 128
     rows: list[dict[str, Any]] = []
     for scene in ("diffuse-sphere", "glossy-sphere", "textured-torus"):
-        samples = build_scene(scene, points)
         shadows = not get_scene(scene).convex
         for name in ("courtyard.exr", "studio.exr"):
-            full = read_panorama(PANORAMAS / name)
-            upper = full.rgb.copy()
-            upper[full.rgb.shape[0] // 2 :] = 0.0  # an object on a black stand
-            environments = {"full": full, "upper": panorama_from_array(upper, source=name)}
-            truths: dict[tuple[str, str, float, float], Any] = {}
-            for count in counts:
-                field = ReflectanceField.open(_field(out, scene, count, points, size, "float32"))
+            environments = _environments(name)
+            for cameras, lights, points, size in ACCURACY_FIELDS[2:3] if quick else ACCURACY_FIELDS:
+                samples = build_scene(scene, points)
+                path = _field(out, scene, cameras, lights, points, size, "float32")
+                field = ReflectanceField.open(path)
                 index = len(field.cameras) // 2
                 views = {
                     "captured": field.cameras[index],
                     "between": _between(field.cameras, index),
                 }
-                for env_name, panorama in environments.items():
-                    for view_name, camera in views.items():
-                        key = (env_name, view_name, camera.azimuth_deg, camera.inclination_deg)
-                        if key not in truths:
-                            truths[key] = render_environment(
-                                samples, panorama.rgb, camera, grid_height=32, shadows=shadows
-                            )
-                        truth = truths[key]
-                        for method, settings in ACCURACY_METHODS.items():
-                            relighter = Relighter(field, settings)
-                            relighter.set_lighting(panorama)
-                            relighter.set_view(camera)
-                            start = time.perf_counter()
-                            image = relighter.render()
-                            seconds = time.perf_counter() - start
-                            mask = image.coverage & truth.coverage
-                            error = _relative_rmse(image.rgb, truth.rgb, mask)
-                            peak = float(truth.rgb[mask].max())
-                            mse = float(np.mean((image.rgb[mask] - truth.rgb[mask]) ** 2))
-                            rows.append(
-                                {
-                                    "scene": scene,
-                                    "panorama": name,
-                                    "environment": env_name,
-                                    "S=T": count,
-                                    "view": view_name,
-                                    "method": method,
-                                    "relative_rmse": error,
-                                    "psnr_db": 10 * np.log10(peak**2 / mse) if mse > 0 else None,
-                                    "render_ms": seconds * 1e3,
-                                    "outside_fraction": image.outside_fraction,
-                                }
-                            )
-                            print(
-                                f"{scene:15s} {name:14s} {env_name:5s} S=T={count:<3d} "
-                                f"{view_name:8s} {error:7.2%}  {method}"
-                            )
+                for (env_name, panorama), (view_name, camera) in product(
+                    environments.items(), views.items()
+                ):
+                    truth = render_environment(
+                        samples, panorama.rgb, camera, grid_height=32, shadows=shadows
+                    )
+                    for method, settings in ACCURACY_METHODS.items():
+                        row = {
+                            "scene": scene,
+                            "panorama": name,
+                            "environment": env_name,
+                            "S": cameras,
+                            "T": lights,
+                            "points": points,
+                            "view": view_name,
+                            "method": method,
+                        } | _score(field, settings, panorama, camera, truth)
+                        rows.append(row)
+                        print(
+                            f"{scene:15s} {name:14s} {env_name:5s} S={cameras:<3d} "
+                            f"T={lights:<3d} {view_name:8s} {row['relative_rmse']:7.2%}  {method}"
+                        )
     return rows
 
 
 def _chart(results: dict[str, Any], path: Path) -> None:
     figure, axis = plt.subplots(figsize=(7, 4.5))
-    rows = [r for r in results["accuracy"] if r["S=T"] == 30 and r["environment"] == "upper"]
+    rows = [
+        r
+        for r in results["accuracy"]
+        if r["S"] == 30 and r["T"] == 30 and r["environment"] == "upper"
+    ]
     for method in ACCURACY_METHODS:
         chosen = [r for r in rows if r["method"] == method]
         axis.scatter(
@@ -308,16 +336,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("-o", "--output", type=Path, default=Path("bench-out"))
     parser.add_argument("--quick", action="store_true", help="fewer points and fields")
     parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--only", choices=("speed", "accuracy"), help="run one half")
     args = parser.parse_args(argv)
     args.output.mkdir(parents=True, exist_ok=True)
     panorama = read_panorama(PANORAMAS / "courtyard.exr")
     points = 50_000 if args.quick else 250_000
-    speed = bench_speed(args.output, points, args.repeats, panorama)
-    print(json.dumps(speed, indent=2))
-    results = {"speed": speed, "accuracy": bench_accuracy(args.output, args.quick)}
-    (args.output / "relight.json").write_text(json.dumps(results, indent=2) + "\n")
-    _chart(results, args.output / "relight.png")
-    print(f"wrote {args.output / 'relight.json'} and {args.output / 'relight.png'}")
+    target = args.output / "relight.json"
+    results: dict[str, Any] = json.loads(target.read_text()) if target.exists() else {}
+    if args.only != "accuracy":
+        results["speed"] = bench_speed(args.output, points, args.repeats, panorama)
+        print(json.dumps(results["speed"], indent=2))
+    if args.only != "speed":
+        results["accuracy"] = bench_accuracy(args.output, args.quick)
+    target.write_text(json.dumps(results, indent=2) + "\n")
+    if "accuracy" in results:
+        _chart(results, args.output / "relight.png")
+    print(f"wrote {target}")
     return 0
 
 
