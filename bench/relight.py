@@ -168,7 +168,7 @@ def _bench_scheme(
 
 def _bench_equations(out: Path, panorama: Panorama) -> dict[str, Any]:
     """Literal eq. 2 against its rearranged form and eq. 3, at equal sizes, in one run."""
-    field = ReflectanceField.open(_field(out, "glossy-sphere", 30, 30, 5000, 128, "float32"))
+    field = ReflectanceField.open(_field(out, "glossy-sphere", 30, 30, 50_000, 256, "float32"))
     camera = PinholeCamera(20.0, 50.0, width=128, height=128)
     blend = blend_cameras(field, camera, "barycentric")
     rgb = panorama.rgb
@@ -187,7 +187,7 @@ def _bench_equations(out: Path, panorama: Panorama) -> dict[str, Any]:
     relighter.set_view(camera)
     sampled_ms = _median_ms(lambda: (relighter.set_lighting(panorama), relighter.render()), 3)
     return {
-        "points": 5000,
+        "points": 50_000,
         "panorama_directions": 64 * 128,
         "literal_eq2_ms": literal_ms,
         "rearranged_eq2_ms": rearranged_ms,
