@@ -73,7 +73,9 @@ def blend_cameras(
 ) -> ViewBlend:
     """Camera weights of every needed sample for the view of ``camera``.
 
-    The view direction is taken per sample (from the sample toward the eye). Cameras that do
+    Each sample's ray toward the eye is followed to the sphere the measured cameras sit on, and
+    the cameras are interpolated at that point (so a captured view uses exactly its camera for
+    every sample, and parallax between cameras is respected). Cameras that do
     not see a sample are dropped and the rest renormalised; a sample none of the chosen cameras
     sees takes the nearest camera that does, and one that no camera sees is a hole.
 
@@ -102,8 +104,11 @@ def blend_cameras(
     assert field.points is not None
     mask = np.ones(p_count, dtype=bool) if needed is None else np.asarray(needed, dtype=bool)
     index = np.flatnonzero(mask)
-    towards = camera.position - field.points[index].astype(np.float64)
-    towards /= np.linalg.norm(towards, axis=1, keepdims=True)
+    towards = _camera_sphere_directions(
+        field.points[index].astype(np.float64),
+        camera.position,
+        float(np.mean([c.distance for c in field.cameras])),
+    )
     chosen = interpolation_weights(field.camera_directions, towards, method, m=n, policy="clamp")
     indices = chosen.indices.copy()
     weights = chosen.weights * field.visibility[indices, index[:, None]]
@@ -158,6 +163,20 @@ def blend_field(field: ReflectanceField, blend: ViewBlend) -> ViewField:
     for row, camera in enumerate(blend.cameras):
         _blend(field.camera_slab(int(camera)), samples, blend.weights[row], radiance)
     return ViewField(samples, radiance, p_count)
+
+
+def _camera_sphere_directions(
+    points: NDArray[np.float64], eye: NDArray[np.float64], radius: float
+) -> NDArray[np.float64]:
+    """Unit directions (P, 3) of where the rays from ``points`` to ``eye`` cross the sphere of
+    ``radius`` (the measured cameras' distance), or of the eye where a ray cannot reach it."""
+    ray = eye - points
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    along = np.einsum("pk,pk->p", points, ray)
+    reach = along**2 - np.einsum("pk,pk->p", points, points) + radius**2
+    crossing = points + (-along + np.sqrt(np.maximum(reach, 0.0)))[:, None] * ray
+    crossing[reach < 0] = eye
+    return crossing / np.linalg.norm(crossing, axis=1, keepdims=True)
 
 
 def relight_view(view: ViewField, lighting: LightWeights) -> NDArray[np.float32]:
