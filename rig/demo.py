@@ -75,6 +75,7 @@ def run_demo(directory: str | Path, *, quick: bool = False) -> Path:
         )
     lines += ["", "Every run gathers the same total light: disassembling conserves energy.", ""]
     lines += _relight_demo(out, panorama, quick)
+    lines += _rti_demo(out)
     report = out / "report.md"
     with atomic_path(report) as temporary:
         temporary.write_text("\n".join(lines), encoding="utf-8")
@@ -146,4 +147,43 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
         write_sequence(folder / "rotating-environment.gif", frames, fps=6)
         link = f"[gif](relight/{scene}/rotating-environment.gif)"
         lines.append(f"| {scene} | best, environment rotating | - | - | {link} |")
+    return [*lines, ""]
+
+
+#: The real RTI capture beside the repository (see ../shared/data/rti/README.md).
+RTI_CAPTURE = Path(__file__).resolve().parents[2] / "shared" / "data" / "rti" / "loewenkopf"
+
+
+def _rti_demo(out: Path) -> list[str]:
+    """Relight the real RTI capture under both shared panoramas; returns the report's lines."""
+    import tempfile
+
+    import numpy as np
+
+    from processing.panorama import read_panorama
+    from processing.rti import import_rti
+    from render.output import display_picture
+    from render.overlay import write_png
+    from render.relighter import Relighter, best_settings
+
+    lines = ["## Relighting a real RTI capture", ""]
+    lp = RTI_CAPTURE / "dirs.lp"
+    if not lp.exists():
+        return [*lines, f"Skipped: {lp} is not there.", ""]
+    lines += [
+        f"`{lp}` (240 lights, one view), imported as a single-view field and relit under the "
+        "shared panoramas (pictures enlarged 4x, nearest neighbour):",
+        "",
+    ]
+    with tempfile.TemporaryDirectory(prefix="rig-demo-rti-") as scratch:
+        field = import_rti(lp, Path(scratch) / "field.zarr", progress=False)
+        relighter = Relighter(field, best_settings(field))
+        relighter.set_view(field.cameras[0])
+        for name in ("courtyard", "studio"):
+            relighter.set_lighting(read_panorama(lp.parents[2] / "panoramas" / f"{name}.exr"))
+            image = relighter.render()
+            picture = display_picture(image.rgb, image.coverage)
+            target = out / "relight" / "rti" / f"{name}.png"
+            write_png(target, np.repeat(np.repeat(picture, 4, axis=0), 4, axis=1))
+            lines.append(f"- under {name}: [png](relight/rti/{name}.png)")
     return [*lines, ""]

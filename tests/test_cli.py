@@ -77,6 +77,7 @@ def test_demo_writes_pictures_and_report(tmp_path: Path) -> None:
     for scene in ("glossy-sphere", "textured-torus"):
         for picture in ("ground-truth.png", "paper.png", "best.png", "rotating-environment.gif"):
             assert (tmp_path / "relight" / scene / picture).stat().st_size > 0
+    assert (tmp_path / "relight" / "rti" / "studio.png").stat().st_size > 0
     assert "## Relighting simulated fields" in report
 
 
