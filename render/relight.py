@@ -190,7 +190,7 @@ def relight_view(view: ViewField, lighting: LightWeights) -> NDArray[np.float32]
             f"light weights are for {lighting.rgb.shape[1]} lights, the field has {t_count}"
         )
     if lighting.sample_rows is None:
-        rows = np.zeros(len(view.samples), dtype=np.int64)
+        rows = np.zeros(1, dtype=np.int64)  # one light row for all: the kernel never reads it
     elif lighting.sample_rows.shape == (view.sample_count,):
         rows = lighting.sample_rows[view.samples]
     else:
@@ -221,7 +221,7 @@ def relight_camera(
         )
     rows = lighting.sample_rows
     if rows is None:
-        rows = np.zeros(p_count, dtype=np.int64)
+        rows = np.zeros(1, dtype=np.int64)
     out = np.zeros((p_count, 3), dtype=np.float32)
     _relight(slab, lighting.rgb, rows, lighting.sample_rows is None, out)
     return out
