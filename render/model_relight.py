@@ -1,0 +1,594 @@
+"""Relighting through per-sample models: any lighting, any view, no interpolation of values.
+
+The models of :mod:`processing.sample_models` are evaluated against an environment's lights:
+
+    L_p = sum_d f_p(w_d, v_p) max(0, n_p . w_d) V_p(w_d) E_d                 (parametric)
+    L_p = sum_k c_pk sum_d B_k(w_d') E_d                                      (linear bases)
+
+with E_d the light of direction w_d (radiance x sr): either K sampled lights of the panorama
+(TMED or another sampler, Voronoi-gathered: :class:`processing.lights.LightSet`) or a
+pre-filtered grid (the panorama summed exactly into h x 2h blocks, each a light at its
+energy-weighted centroid, as the simulator's ground truth does). v_p is the direction from each
+sample toward the wanted camera (the camera direction for a pixel field), so highlights move
+with the view as the fitted BRDF says, instead of blending the captured views.
+
+Where the light comes from outside the measured lights' region (below the lowest ring, or below
+the horizon, where a rig has no lights):
+
+- parametric models evaluate the fitted BRDF there physically, with max(0, n . w); only the
+  shadow marks V must be extrapolated. ``measured``: the barycentric interpolation of the
+  measured marks with the ``clamp`` policy (V of the nearest boundary edge of the measured
+  region); unshadowed samples have V = 1 at every measured light, so they are exact whatever
+  the direction, cast shadows from below are guessed from the lowest lights. ``geometry``:
+  marks from shadow maps of the field's own point cloud complete the measured ones (outside
+  the region, or everywhere), :func:`processing.sample_models.with_geometric_visibility`;
+  ``auto`` takes them when they predict held-out measured marks better than interpolation
+  does (:func:`processing.sample_models.shadow_mark_errors`), so the choice is made on
+  measurements, never on ground truth.
+- linear bases are evaluated at the direction clamped to the measured region (the point of its
+  nearest boundary edge, as the interpolation's ``clamp`` policy): a polynomial extrapolated
+  far beyond its data is unbounded.
+- pixel fields (RTI: a flat object on its support, camera straight above) receive no light from
+  behind the object plane (camera-frame z <= 0), whatever the model.
+
+Samples without any usable observation (no camera sees them lit) take the parameters of the
+nearest fitted sample and are reported as holes (:class:`render.relighter.RelitImage`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from processing.interpolation import interpolation_weights
+from processing.lights import LightSet, disassemble_lights
+from processing.panorama import Panorama, adjust_panorama
+from processing.reflectance_field import ReflectanceField
+from processing.sample_models import (
+    BasisFit,
+    ModelChoice,
+    ParametricFit,
+    SampleModels,
+    choose_model,
+    evaluate_basis,
+    fit_sample_models,
+    shadow_mark_errors,
+    with_geometric_visibility,
+)
+from processing.sampling import SamplerName, sample_environment
+from render.relighter import RelitImage
+from render.splat import SplatPlan, plan_splats, point_spacing, splat
+from rig.camera_model import PinholeCamera
+from rig.colour import REC709_LUMINANCE
+from rig.directions import panorama_directions, panorama_solid_angles
+from rig.errors import InputError
+
+__all__ = [
+    "LIGHTING_MODES",
+    "VISIBILITY_MODES",
+    "EnvironmentLights",
+    "ModelLighting",
+    "ModelRelightSettings",
+    "ModelRelighter",
+    "fill_sources",
+    "grid_lights",
+    "prepare_lighting",
+    "relight_models",
+    "sampled_lights",
+]
+
+#: How an environment becomes directional lights: K sampled lights, or a pre-filtered grid.
+LIGHTING_MODES = ("sampled", "grid")
+#: Where the shadow marks come from (point fields): the measured ones only (clamped outside the
+#: measured region), completed by geometric ones outside it, or everywhere; "auto" takes the
+#: geometric ones everywhere when they predict held-out measured marks better.
+VISIBILITY_MODES = ("auto", "measured", "geometry-outside", "geometry")
+#: "auto" trusts the geometry when its mark error plus the floor is below this share of
+#: interpolation's (the floor keeps unshadowed objects, where both are ~0, on measured marks).
+GEOMETRY_MARGIN, GEOMETRY_FLOOR = 0.9, 1e-3
+
+
+@dataclass(frozen=True)
+class EnvironmentLights:
+    """Directional lights standing for an environment.
+
+    Attributes
+    ----------
+    directions : ndarray, shape (D, 3), float64, unit vectors toward each light (rig frame)
+    rgb : ndarray, shape (D, 3), float64, light of each direction, radiance x sr
+    """
+
+    directions: NDArray[np.float64]
+    rgb: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        if self.directions.ndim != 2 or self.directions.shape[1] != 3:
+            raise InputError(f"light directions must be (D, 3), got {self.directions.shape}")
+        if self.rgb.shape != self.directions.shape:
+            raise InputError(
+                f"light rgb {self.rgb.shape} does not match directions {self.directions.shape}"
+            )
+
+
+def grid_lights(rgb: NDArray[np.floating], grid_height: int = 32) -> EnvironmentLights:
+    """The panorama summed exactly into ``grid_height`` x 2 ``grid_height`` blocks.
+
+    Each block becomes one light at its energy-weighted centroid direction carrying the block's
+    radiance x solid angle (blocks without light are dropped): the simulator's ground-truth
+    pre-filter, so a grid of the same height matches it direction for direction.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (H, 2H, 3), linear radiance
+    grid_height : int, 1 <= grid_height <= H (blocks as equal as integer rows allow)
+    """
+    image = np.asarray(rgb, dtype=np.float64)
+    if image.ndim != 3 or image.shape[2] != 3 or image.shape[1] != 2 * image.shape[0]:
+        raise InputError(f"a panorama must have shape (H, 2H, 3), got {image.shape}")
+    height, width = image.shape[:2]
+    if not 1 <= grid_height <= height:
+        raise InputError(f"grid height must be in 1..{height}, got {grid_height}")
+    omega = panorama_solid_angles(height, width)
+    directions = panorama_directions(height, width)
+    energy = image * omega[:, :, None]
+    rows = (np.arange(grid_height) * height) // grid_height
+    cols = (np.arange(2 * grid_height) * width) // (2 * grid_height)
+    light = np.add.reduceat(np.add.reduceat(energy, rows, axis=0), cols, axis=1).reshape(-1, 3)
+    weight = energy.sum(axis=2) + 1e-30 * omega  # the geometric centre where there is no light
+    moments = np.add.reduceat(
+        np.add.reduceat(directions * weight[:, :, None], rows, axis=0), cols, axis=1
+    ).reshape(-1, 3)
+    centroids = moments / np.linalg.norm(moments, axis=1, keepdims=True)
+    keep = light.sum(axis=1) > 0
+    return EnvironmentLights(
+        np.ascontiguousarray(centroids[keep]), np.ascontiguousarray(light[keep])
+    )
+
+
+def sampled_lights(
+    rgb: NDArray[np.floating],
+    k: int = 128,
+    *,
+    sampler: SamplerName = "tmed",
+    seed: int = 0,
+    centroids: bool = True,
+) -> EnvironmentLights:
+    """K lights sampled from the panorama, each gathering its Voronoi cell's light.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (H, 2H, 3), linear radiance
+    k, sampler, seed : see :func:`processing.sampling.sample_environment`
+    centroids : bool
+        Place each light at its cell's energy-weighted centroid direction instead of the
+        sample (the paper's choice). The centroid keeps the cell's first moment, so anything
+        linear in the direction (a cosine that does not clip inside the cell) is exact; it
+        halves the error of glossy lobes under the courtyard at K = 128-256 (docs/models.md).
+    """
+    samples = sample_environment(rgb, k, method=sampler, seed=seed)
+    lights: LightSet = disassemble_lights(rgb, samples.directions)
+    directions = lights.directions
+    if centroids:
+        image = np.asarray(rgb, dtype=np.float64)
+        height, width = image.shape[:2]
+        weight = (image.sum(axis=2) * panorama_solid_angles(height, width)).ravel()
+        pixel_directions = panorama_directions(height, width).reshape(-1, 3)
+        labels = lights.labels.ravel()
+        moments = np.stack(
+            [np.bincount(labels, weight * pixel_directions[:, i], lights.k) for i in range(3)],
+            axis=1,
+        )
+        length = np.linalg.norm(moments, axis=1, keepdims=True)
+        directions = np.where(length > 0, moments / np.maximum(length, 1e-300), directions)
+    keep = lights.rgb.sum(axis=1) > 0
+    return EnvironmentLights(
+        np.ascontiguousarray(directions[keep]), np.ascontiguousarray(lights.rgb[keep])
+    )
+
+
+@dataclass(frozen=True)
+class ModelLighting:
+    """An environment's lights prepared for one field's models.
+
+    Attributes
+    ----------
+    lights : EnvironmentLights, D lights
+    visibility_indices, visibility_weights : ndarray, shape (D, 3), int64 / float64
+        Barycentric weights (``clamp`` policy) of each light over the directions of the shadow
+        marks (``SampleModels.visibility_directions``: the measured lights, plus geometric
+        ones when completed): V_p(w_d) = sum_j weights[d, j] lit[p, indices[d, j]].
+    reaches : ndarray, shape (D,), bool, lights that may reach the samples (pixel fields: in
+        front of the object plane; point fields: all)
+    basis : dict of model name to ndarray (B, 3), float64
+        Linear-basis models: sum_d B_k(w_d') E_d over the lights that reach the object.
+    outside_fraction : float
+        Share of the lights' luminous energy from outside the measured region.
+    """
+
+    lights: EnvironmentLights
+    visibility_indices: NDArray[np.int64]
+    visibility_weights: NDArray[np.float64]
+    reaches: NDArray[np.bool_]
+    basis: dict[str, NDArray[np.float64]]
+    outside_fraction: float
+
+
+def prepare_lighting(models: SampleModels, lights: EnvironmentLights) -> ModelLighting:
+    """Interpolation weights and basis integrals of ``lights`` for ``models``."""
+    measured = models.light_directions
+    weights = interpolation_weights(measured, lights.directions, "barycentric", policy="clamp")
+    marks = weights
+    if models.mark_directions is not None:
+        # Shadow marks completed beyond the measured lights: interpolate over all of them.
+        marks = interpolation_weights(
+            models.mark_directions, lights.directions, "barycentric", policy="clamp"
+        )
+    if models.kind == "pixels":
+        # A flat RTI object lies on its support: no light from behind the object plane.
+        reaches = lights.directions @ models.camera_frame[2] > 0.0
+    else:
+        reaches = np.ones(len(lights.directions), dtype=bool)
+    basis: dict[str, NDArray[np.float64]] = {}
+    if any(isinstance(f, BasisFit) for f in models.fits.values()):
+        # Bases are evaluated at the direction clamped to the measured region (the chord point
+        # the barycentric clamp weights describe), never extrapolated.
+        clamped = np.einsum("dj,djk->dk", weights.weights, measured[weights.indices])
+        clamped /= np.linalg.norm(clamped, axis=1, keepdims=True)
+        inside = np.where(weights.outside[:, None], clamped, lights.directions)
+        camera_directions = inside @ models.camera_frame.T
+        light = lights.rgb * reaches[:, None]
+        for name, fit in models.fits.items():
+            if isinstance(fit, BasisFit):
+                basis[name] = evaluate_basis(name, camera_directions).T @ light
+    luma = lights.rgb @ REC709_LUMINANCE.astype(np.float64)
+    total = float(luma.sum())
+    outside = float(luma[weights.outside].sum()) / total if total > 0 else 0.0
+    return ModelLighting(
+        lights=lights,
+        visibility_indices=np.ascontiguousarray(marks.indices),
+        visibility_weights=np.ascontiguousarray(marks.weights),
+        reaches=reaches,
+        basis=basis,
+        outside_fraction=outside,
+    )
+
+
+def fill_sources(models: SampleModels, name: str) -> NDArray[np.int64]:
+    """The sample whose parameters each sample uses: itself, or the nearest fitted sample.
+
+    Returns
+    -------
+    ndarray, shape (P,), int64 (pixel fields and fully fitted fields: the identity)
+    """
+    fit = models.fit(name)
+    identity = np.arange(models.sample_count, dtype=np.int64)
+    if not isinstance(fit, ParametricFit) or fit.fitted.all() or not fit.fitted.any():
+        return identity
+    if models.points is None:
+        return identity  # pixels without signal relight to 0 (their fit is all zeros)
+    fitted = np.flatnonzero(fit.fitted)
+    _, nearest = cKDTree(models.points[fitted]).query(models.points[~fit.fitted])
+    identity[~fit.fitted] = fitted[np.asarray(nearest, dtype=np.int64)]
+    return identity
+
+
+def relight_models(
+    models: SampleModels,
+    choice: ModelChoice,
+    lighting: ModelLighting,
+    camera: PinholeCamera,
+    *,
+    needed: NDArray[np.bool_] | None = None,
+    sources: dict[str, NDArray[np.int64]] | None = None,
+) -> NDArray[np.float32]:
+    """Radiance (P, 3), float32, of every needed sample for ``camera`` under ``lighting``.
+
+    Parameters
+    ----------
+    models : SampleModels
+    choice : ModelChoice, which model each sample uses
+    lighting : ModelLighting of these models
+    camera : PinholeCamera, the view (a pixel field's own camera)
+    needed : ndarray, shape (P,), bool, optional; samples to relight (others are 0)
+    sources : per model, :func:`fill_sources` (computed here when None)
+    """
+    p_count = models.sample_count
+    mask = np.ones(p_count, dtype=bool) if needed is None else np.asarray(needed, dtype=bool)
+    if mask.shape != (p_count,):
+        raise InputError(f"needed must have shape ({p_count},), got {mask.shape}")
+    which = choice.sample_model(p_count)
+    out = np.zeros((p_count, 3), dtype=np.float32)
+    lights = lighting.lights
+    if models.kind == "pixels":
+        assert models.view_direction is not None
+        eye, distant = models.view_direction, True
+    else:
+        eye, distant = np.asarray(camera.position, dtype=np.float64), False
+    points = models.points if models.points is not None else np.zeros((1, 3))
+    for index, name in enumerate(choice.names):
+        samples = np.flatnonzero(mask & (which == index)).astype(np.int64)
+        if samples.size == 0:
+            continue
+        fit = models.fit(name)
+        if isinstance(fit, BasisFit):
+            out[samples] = np.einsum(
+                "pbc,bc->pc", fit.coefficients[samples], lighting.basis[name]
+            ).astype(np.float32)
+            continue
+        source = fill_sources(models, name) if sources is None else sources[name]
+        _shade_kernel(
+            samples, source, fit.normals, fit.rho_d, fit.f0, fit.alpha, fit.lit, points,
+            eye, distant, name == "lambert+ggx", lights.directions, lights.rgb,
+            lighting.visibility_indices, lighting.visibility_weights, lighting.reaches, out,
+        )  # fmt: skip
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _lobe(cos_i: float, cos_o: float, cos_h: float, alpha: float) -> float:
+    # D G1 G1 / (4 cos_i cos_o) of GGX, as processing.sample_models fits it (tested equal).
+    if cos_h <= 0.0:
+        return 0.0
+    a2 = alpha * alpha
+    t = cos_h * cos_h * (a2 - 1.0) + 1.0
+    g1_i = 2.0 * cos_i / (cos_i + math.sqrt(a2 + (1.0 - a2) * cos_i * cos_i))
+    g1_o = 2.0 * cos_o / (cos_o + math.sqrt(a2 + (1.0 - a2) * cos_o * cos_o))
+    return a2 / (math.pi * t * t) * g1_i * g1_o / (4.0 * cos_i * cos_o)
+
+
+@numba.njit(cache=True, parallel=True)
+def _shade_kernel(
+    samples: NDArray[np.int64],
+    source: NDArray[np.int64],
+    normals: NDArray[np.float64],
+    rho_d: NDArray[np.float32],
+    f0: NDArray[np.float32],
+    alpha: NDArray[np.float32],
+    lit: NDArray[np.float32],
+    points: NDArray[np.float64],
+    eye: NDArray[np.float64],
+    distant: bool,
+    with_lobe: bool,
+    directions: NDArray[np.float64],
+    rgb: NDArray[np.float64],
+    vis_indices: NDArray[np.int64],
+    vis_weights: NDArray[np.float64],
+    reaches: NDArray[np.bool_],
+    out: NDArray[np.float32],
+) -> None:
+    # One sample per iteration, every light: the fitted BRDF times the cosine, the
+    # interpolated shadow marks and the light. The sample's own normal, the parameters (and
+    # marks) of its source (itself unless it had no observation).
+    for j in numba.prange(samples.shape[0]):
+        p = samples[j]
+        q = source[p]
+        nx, ny, nz = normals[p, 0], normals[p, 1], normals[p, 2]
+        if distant:
+            vx, vy, vz = eye[0], eye[1], eye[2]
+        else:
+            vx, vy, vz = eye[0] - points[p, 0], eye[1] - points[p, 1], eye[2] - points[p, 2]
+            length = math.sqrt(vx * vx + vy * vy + vz * vz)
+            vx, vy, vz = vx / length, vy / length, vz / length
+        cos_o = nx * vx + ny * vy + nz * vz
+        if cos_o <= 0.0:
+            continue
+        diffuse_r = rho_d[q, 0] / math.pi
+        diffuse_g = rho_d[q, 1] / math.pi
+        diffuse_b = rho_d[q, 2] / math.pi
+        a = alpha[q]
+        r = g = b = 0.0
+        for d in range(directions.shape[0]):
+            if not reaches[d]:
+                continue
+            wx, wy, wz = directions[d, 0], directions[d, 1], directions[d, 2]
+            cos_i = nx * wx + ny * wy + nz * wz
+            if cos_i <= 0.0:
+                continue
+            visible = 0.0
+            for k in range(vis_indices.shape[1]):
+                visible += vis_weights[d, k] * lit[q, vis_indices[d, k]]
+            if visible <= 0.0:
+                continue
+            scale = cos_i * visible
+            if with_lobe:
+                hx, hy, hz = wx + vx, wy + vy, wz + vz
+                cos_h = (nx * hx + ny * hy + nz * hz) / max(
+                    math.sqrt(hx * hx + hy * hy + hz * hz), 1e-300
+                )
+                specular = _lobe(cos_i, cos_o, cos_h, a)
+                r += (diffuse_r + f0[q, 0] * specular) * scale * rgb[d, 0]
+                g += (diffuse_g + f0[q, 1] * specular) * scale * rgb[d, 1]
+                b += (diffuse_b + f0[q, 2] * specular) * scale * rgb[d, 2]
+            else:
+                r += diffuse_r * scale * rgb[d, 0]
+                g += diffuse_g * scale * rgb[d, 1]
+                b += diffuse_b * scale * rgb[d, 2]
+        out[p, 0] = r
+        out[p, 1] = g
+        out[p, 2] = b
+
+
+@dataclass(frozen=True)
+class ModelRelightSettings:
+    """How to relight through models.
+
+    Attributes
+    ----------
+    model : str
+        "auto" (the field's model chosen by LOO error), "auto-per-sample" (each sample's), or a
+        fitted model's name.
+    lighting : "sampled" (K lights of ``sampler``) or "grid" (pre-filtered panorama blocks)
+    k, sampler, seed : sampled lighting
+    grid_height : rows of the grid lighting (2 x as many columns)
+    visibility : one of ``VISIBILITY_MODES`` (pixel fields: always the measured marks)
+    spacing : float, optional
+        Point spacing for splats and shadow maps (default: the median nearest-neighbour
+        distance, :func:`render.splat.point_spacing`).
+    """
+
+    model: str = "auto"
+    lighting: str = "sampled"
+    k: int = 128
+    sampler: SamplerName = "tmed"
+    seed: int = 0
+    grid_height: int = 32
+    visibility: str = "auto"
+    spacing: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.lighting not in LIGHTING_MODES:
+            raise InputError(
+                f"unknown lighting {self.lighting!r}; use one of {', '.join(LIGHTING_MODES)}"
+            )
+        if self.visibility not in VISIBILITY_MODES:
+            raise InputError(
+                f"unknown visibility {self.visibility!r}; use one of {', '.join(VISIBILITY_MODES)}"
+            )
+        if self.spacing is not None and not self.spacing > 0:
+            raise InputError(f"point spacing must be positive, got {self.spacing}")
+
+
+class ModelRelighter:
+    """Relight one field through its fitted models under changing lightings and views.
+
+    Parameters
+    ----------
+    field_store : ReflectanceField
+    settings : ModelRelightSettings, optional
+    models : SampleModels, optional; fitted here (:func:`fit_sample_models`) when None
+    """
+
+    def __init__(
+        self,
+        field_store: ReflectanceField,
+        settings: ModelRelightSettings | None = None,
+        models: SampleModels | None = None,
+    ) -> None:
+        self.field = field_store
+        self.settings = settings or ModelRelightSettings()
+        self.models = models if models is not None else fit_sample_models(field_store)
+        if self.models.sample_count != field_store.shape[2]:
+            raise InputError(
+                f"the models are of {self.models.sample_count} samples, {field_store.path} has "
+                f"{field_store.shape[2]}"
+            )
+        model = self.settings.model
+        if model in ("auto", "auto-per-sample"):
+            self.choice = choose_model(self.models, per_sample=model == "auto-per-sample")
+        else:
+            self.choice = choose_model(self.models, candidates=[model])
+        self._spacing: float | None = self.settings.spacing
+        self.mark_errors: dict[str, float] | None = None
+        self.visibility = self._visibility_mode()
+        if self.visibility != "measured":
+            assert field_store.normals is not None
+            if self._spacing is None:
+                assert self.models.points is not None
+                self._spacing = point_spacing(self.models.points)
+            chosen = replace(self.models, fits={n: self.models.fits[n] for n in self.choice.names})
+            self.models = with_geometric_visibility(
+                chosen,
+                field_store.normals,
+                everywhere=self.visibility == "geometry",
+                spacing=self._spacing,
+            )
+        self._sources = {
+            name: fill_sources(self.models, name)
+            for name in self.choice.names
+            if isinstance(self.models.fits[name], ParametricFit)
+        }
+        unfitted = np.zeros(self.models.sample_count, dtype=bool)
+        which = self.choice.sample_model(self.models.sample_count)
+        for index, name in enumerate(self.choice.names):
+            fit = self.models.fits[name]
+            if isinstance(fit, ParametricFit):
+                unfitted |= (which == index) & ~fit.fitted
+        self._unfitted = unfitted
+        self._lighting: ModelLighting | None = None
+        self._view: tuple[PinholeCamera, SplatPlan | None, NDArray[np.bool_]] | None = None
+
+    def _visibility_mode(self) -> str:
+        """The shadow marks to use: the setting, or for "auto" the better predictor."""
+        mode = self.settings.visibility
+        if self.models.kind == "pixels" or not any(
+            isinstance(self.models.fits[n], ParametricFit) for n in self.choice.names
+        ):
+            if mode not in ("auto", "measured"):
+                raise InputError(
+                    f"visibility {mode!r} needs surface points and a parametric model; "
+                    f"{self.field.path} relights through {', '.join(self.choice.names)}"
+                )
+            return "measured"
+        if mode != "auto":
+            return mode
+        assert self.field.normals is not None
+        errors = shadow_mark_errors(self.models, self.field.normals, spacing=self._spacing)
+        self.mark_errors = errors
+        better = errors["geometry"] + GEOMETRY_FLOOR < GEOMETRY_MARGIN * errors["interpolated"]
+        return "geometry" if better else "measured"
+
+    def set_lighting(
+        self, panorama: Panorama, *, yaw_deg: float = 0.0, exposure: float = 1.0
+    ) -> float:
+        """Prepare the lights of a panorama; returns the seconds it took."""
+        start = time.perf_counter()
+        s = self.settings
+        rgb = adjust_panorama(panorama, yaw_deg=yaw_deg, exposure=exposure).rgb
+        if s.lighting == "grid":
+            lights = grid_lights(rgb, s.grid_height)
+        else:
+            lights = sampled_lights(rgb, s.k, sampler=s.sampler, seed=s.seed)
+        self._lighting = prepare_lighting(self.models, lights)
+        return time.perf_counter() - start
+
+    def set_view(self, camera: PinholeCamera) -> float:
+        """Plan the splats of a view (point fields); returns the seconds it took."""
+        start = time.perf_counter()
+        f = self.field
+        if f.sample_kind == "pixels":
+            if not np.allclose(camera.direction, f.camera_directions[0], atol=1e-6):
+                raise InputError(
+                    f"{f.path} holds the pixels of one view; it cannot be seen from "
+                    f"({camera.azimuth_deg:g}, {camera.inclination_deg:g})"
+                )
+            self._view = (camera, None, np.ones(f.shape[2], dtype=bool))
+        else:
+            assert f.points is not None and f.normals is not None
+            if self._spacing is None:
+                self._spacing = point_spacing(f.points)
+            plan = plan_splats(f.points, f.normals, camera, self._spacing)
+            self._view = (camera, plan, plan.visible)
+        return time.perf_counter() - start
+
+    def render(self) -> RelitImage:
+        """Relight the current view under the current lighting."""
+        if self._lighting is None or self._view is None:
+            raise InputError("set a lighting and a view before rendering")
+        camera, plan, needed = self._view
+        start = time.perf_counter()
+        radiance = relight_models(
+            self.models, self.choice, self._lighting, camera, needed=needed, sources=self._sources
+        )
+        relit = time.perf_counter()
+        if plan is None:
+            assert self.field.image_shape is not None
+            height, width = self.field.image_shape
+            rgb = radiance.reshape(height, width, 3)
+            coverage = self.field.visibility[0].reshape(height, width)
+        else:
+            rgb, coverage = splat(plan, radiance), plan.coverage
+        done = time.perf_counter()
+        return RelitImage(
+            rgb=rgb,
+            coverage=coverage,
+            radiance=radiance,
+            holes=needed & self._unfitted,
+            outside_fraction=self._lighting.outside_fraction,
+            seconds={"relight": relit - start, "splat": done - relit},
+        )
