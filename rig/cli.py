@@ -78,7 +78,9 @@ def _run_sample(args: argparse.Namespace) -> int:
 
 def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from processing.interpolation import METHODS
+    from processing.sample_models import MODELS
     from processing.sampling import SAMPLERS
+    from render.relight_mode import MOST_ACCURATE_MODELS
     from render.relighter import SCHEMES
 
     p = commands.add_parser(
@@ -93,9 +95,18 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
         "field", type=Path, help="reflectance field store, or an RTI .lp file (or its folder)"
     )
     p.add_argument("--env", type=Path, required=True, help="panorama file")
-    p.add_argument("--scheme", choices=SCHEMES, help="how the panorama lights the field "
-                   "(default: the most accurate the field supports)")  # fmt: skip
-    p.add_argument("-k", type=int, default=64, help="sampled lights (scheme sampled, default 64)")
+    p.add_argument("--scheme", choices=(*SCHEMES, "model"), help="how the panorama lights the "
+                   "field; model: through per-sample models fitted to it (default: the most "
+                   "accurate, chosen by leave-one-light-out error)")  # fmt: skip
+    p.add_argument("-k", type=int, help="sampled lights (default 64; scheme model: sample K "
+                   "lights instead of the panorama's grid)")  # fmt: skip
+    p.add_argument("--model", choices=("auto", "auto-per-sample", *MODELS), default="auto",
+                   help="scheme model: the model (default: by leave-one-light-out)")  # fmt: skip
+    p.add_argument("--grid", type=int, default=MOST_ACCURATE_MODELS.grid_height,
+                   help="scheme model: the panorama summed into GRID x 2 GRID lights (default "
+                   f"{MOST_ACCURATE_MODELS.grid_height})")  # fmt: skip
+    p.add_argument("--models", type=Path, help="saved fit of the field (default: FIELD.models.npz "
+                   "beside the store; fitted and saved there when missing)")  # fmt: skip
     p.add_argument("--sampler", choices=SAMPLERS, default="tmed", help="sampler (default tmed)")
     p.add_argument("--interp", choices=METHODS, help="interpolation over the measured lights")
     p.add_argument("--view-interp", choices=METHODS, help="interpolation over the cameras")
@@ -161,18 +172,9 @@ def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: 
     from dataclasses import replace
 
     from render.output import IMAGE_SUFFIXES, display_picture, write_image, write_sequence
-    from render.relighter import Relighter, RelightSettings, best_settings
+    from render.relight_mode import open_relighter
     from rig.camera_model import PinholeCamera
 
-    if args.paper:
-        settings = RelightSettings.paper_configuration(k=args.k)
-    else:
-        settings = best_settings(field) if args.scheme is None else RelightSettings(args.scheme)
-        settings = replace(settings, k=args.k, sampler=args.sampler, m=args.m, n=args.n)
-        if args.interp:
-            settings = replace(settings, interpolation=args.interp)
-        if args.view_interp:
-            settings = replace(settings, view_interpolation=args.view_interp)
     if field.sample_kind == "pixels":
         camera = field.cameras[0]
         if args.view is not None:
@@ -183,7 +185,8 @@ def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: 
         camera = PinholeCamera(
             args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
         )
-    relighter = Relighter(field, settings)
+    mode, models = _relight_mode(args, field)
+    relighter = open_relighter(field, mode, models)
     if suffix in IMAGE_SUFFIXES:
         relighter.set_lighting(panorama, yaw_deg=args.yaw, exposure=args.exposure)
         relighter.set_view(camera)
@@ -192,7 +195,7 @@ def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: 
             _write_pyvista_picture(args, field, camera, image)
         else:
             write_image(args.output, image.rgb, image.coverage)
-        _report_relit(args, image.holes, image.outside_fraction)
+        _report_relit(args, image.holes, image.outside_fraction, models is not None)
         return 0
     if args.frames < 1:
         raise RigError(f"--frames must be at least 1, got {args.frames}")
@@ -220,6 +223,40 @@ def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: 
     return 0
 
 
+def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any]:
+    """The relighting mode the flags ask for, and the field's models when it needs them."""
+    from dataclasses import replace
+
+    from processing.sample_model_store import models_for_field
+    from render.model_relight import ModelRelightSettings
+    from render.relight_mode import most_accurate_mode
+    from render.relighter import RelightSettings
+
+    k = 64 if args.k is None else args.k
+    if args.paper:
+        return RelightSettings.paper_configuration(k=k), None
+    if args.scheme == "model":
+        lighting = "grid" if args.k is None else "sampled"
+        mode = ModelRelightSettings(
+            model=args.model, lighting=lighting, k=k, sampler=args.sampler, grid_height=args.grid
+        )
+        return mode, models_for_field(field, args.models, progress=True)
+    flags = (args.scheme, args.interp, args.view_interp, args.k)
+    if all(flag is None for flag in flags):
+        choice = most_accurate_mode(field, models_path=args.models, progress=True)
+        print(f"relighting mode: {choice.reason}")
+        if isinstance(choice.mode, ModelRelightSettings):
+            return replace(choice.mode, grid_height=args.grid), choice.models
+        return choice.mode, None
+    settings = RelightSettings(args.scheme or "sampled", k=k, sampler=args.sampler, m=args.m,
+                               n=args.n)  # fmt: skip
+    if args.interp:
+        settings = replace(settings, interpolation=args.interp)
+    if args.view_interp:
+        settings = replace(settings, view_interpolation=args.view_interp)
+    return settings, None
+
+
 def _write_pyvista_picture(args: argparse.Namespace, field: Any, camera: Any, image: Any) -> None:
     import numpy as np
 
@@ -241,14 +278,19 @@ def _write_pyvista_picture(args: argparse.Namespace, field: Any, camera: Any, im
     )
 
 
-def _report_relit(args: argparse.Namespace, holes: Any, outside: float) -> None:
+def _report_relit(args: argparse.Namespace, holes: Any, outside: float, models: bool) -> None:
     print(f"{args.field} under {args.env} -> {args.output}")
     if holes.any():
         print(f"warning: {int(holes.sum())} visible samples are seen by no chosen camera (holes)")
-    if outside > 0.05:
+    if outside > 0.05 and not models:
         print(
             f"warning: {outside:.0%} of the light comes from outside the measured lights "
             "(below the lowest ring, say); it is moved to the nearest measured lights"
+        )
+    elif outside > 0.05:
+        print(
+            f"note: {outside:.0%} of the light comes from outside the measured lights; the "
+            "fitted models shade it, its cast shadows are extrapolated from the measured ones"
         )
 
 

@@ -22,6 +22,8 @@ from rig.atomic import atomic_path
 
 if TYPE_CHECKING:
     from processing.panorama import Panorama
+    from processing.sample_models import SampleModels
+    from render.relight_mode import RelightMode
 
 __all__ = ["DEMO_KS", "bundled_panorama_path", "run_demo"]
 
@@ -89,7 +91,8 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
     from processing.reflectance_field import ReflectanceField
     from render.output import display_picture, write_sequence
     from render.overlay import write_png
-    from render.relighter import Relighter, RelightSettings, best_settings
+    from render.relight_mode import most_accurate_mode, open_relighter
+    from render.relighter import RelightSettings, best_settings
     from render.tonemap import auto_exposure
     from sim.field import field_cameras, simulate_field
     from sim.ground_truth import render_environment
@@ -121,9 +124,14 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
         lines.append(
             f"| {scene} | ground truth | - | - | [png](relight/{scene}/ground-truth.png) |"
         )
-        methods = {"paper": RelightSettings.paper_configuration(64), "best": best_settings(field)}
-        for name, settings in methods.items():
-            relighter = Relighter(field, settings)
+        choice = most_accurate_mode(field)
+        methods: dict[str, tuple[str, RelightMode]] = {
+            "paper": ("paper: TMED K=64, cosine 3x3, eq. 3", RelightSettings.paper_configuration()),
+            "interpolated": ("eq. 2, barycentric", best_settings(field)),
+            "best": (f"chosen by LOO: {_mode_label(choice.mode, choice.models)}", choice.mode),
+        }
+        for name, (label, mode) in methods.items():
+            relighter = open_relighter(field, mode, choice.models)
             relighter.set_lighting(panorama)
             relighter.set_view(view)
             start = time.perf_counter()
@@ -134,10 +142,9 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
                 np.mean((image.rgb[mask] - truth.rgb[mask]) ** 2) / np.mean(truth.rgb[mask] ** 2)
             )
             write_png(folder / f"{name}.png", display_picture(image.rgb, image.coverage, exposure))
-            label = f"{name} ({settings.scheme}, {settings.interpolation})"
             link = f"[png](relight/{scene}/{name}.png)"
             lines.append(f"| {scene} | {label} | {error:.2%} | {ms:.1f} | {link} |")
-        relighter = Relighter(field, best_settings(field))
+        relighter = open_relighter(field, choice.mode, choice.models)
         relighter.set_view(view)
         frames = []
         for yaw in range(0, 360, 30):
@@ -148,6 +155,17 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
         link = f"[gif](relight/{scene}/rotating-environment.gif)"
         lines.append(f"| {scene} | best, environment rotating | - | - | {link} |")
     return [*lines, ""]
+
+
+def _mode_label(mode: RelightMode, models: SampleModels) -> str:
+    """A short name of a relighting mode for the report."""
+    from processing.sample_models import choose_model
+    from render.model_relight import ModelRelightSettings
+
+    if isinstance(mode, ModelRelightSettings):
+        lights = f"grid {mode.grid_height}" if mode.lighting == "grid" else f"K={mode.k}"
+        return f"model {choose_model(models).chosen}, {lights}"
+    return f"{mode.scheme}, {mode.interpolation}"
 
 
 #: The real RTI capture beside the repository (see ../shared/data/rti/README.md).
@@ -162,9 +180,10 @@ def _rti_demo(out: Path) -> list[str]:
 
     from processing.panorama import read_panorama
     from processing.rti import import_rti
+    from processing.sample_models import choose_model, format_loo_table, interpolation_loo
     from render.output import display_picture
     from render.overlay import write_png
-    from render.relighter import Relighter, best_settings
+    from render.relight_mode import most_accurate_mode, open_relighter
 
     lines = ["## Relighting a real RTI capture", ""]
     lp = RTI_CAPTURE / "dirs.lp"
@@ -177,7 +196,8 @@ def _rti_demo(out: Path) -> list[str]:
     ]
     with tempfile.TemporaryDirectory(prefix="rig-demo-rti-") as scratch:
         field = import_rti(lp, Path(scratch) / "field.zarr", progress=False)
-        relighter = Relighter(field, best_settings(field))
+        choice = most_accurate_mode(field)
+        relighter = open_relighter(field, choice.mode, choice.models)
         relighter.set_view(field.cameras[0])
         for name in ("courtyard", "studio"):
             relighter.set_lighting(read_panorama(lp.parents[2] / "panoramas" / f"{name}.exr"))
@@ -186,4 +206,9 @@ def _rti_demo(out: Path) -> list[str]:
             target = out / "relight" / "rti" / f"{name}.png"
             write_png(target, np.repeat(np.repeat(picture, 4, axis=0), 4, axis=1))
             lines.append(f"- under {name}: [png](relight/rti/{name}.png)")
+        lines += ["", f"Relighting mode: {choice.reason}.", "", "Leave-one-light-out error:", ""]
+        lines.append(format_loo_table(choose_model(choice.models).table, extra={
+            f"interpolation: {m}": interpolation_loo(field, m).relative_rmse
+            for m in ("nearest", "barycentric", "paper")
+        }))  # fmt: skip
     return [*lines, ""]

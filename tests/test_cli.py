@@ -151,3 +151,22 @@ def test_relight_through_vtk(tmp_path: Path, small_field: Path, courtyard_path: 
     assert main(args) == 0
     picture = cv2.imread(str(out))
     assert picture.shape == (48, 48, 3) and 0.2 < (picture.max(axis=2) > 0).mean() < 0.9
+
+
+def test_relight_chooses_models_by_held_out_lights(
+    tmp_path: Path, small_field: Path, courtyard_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    base = ["relight", str(small_field), "--env", str(courtyard_path), "--view", "30,50",
+            "--size", "48x48"]  # fmt: skip
+    saved = tmp_path / "fit.npz"
+    assert main([*base, "--models", str(saved), "-o", str(tmp_path / "auto.png")]) == 0
+    out = capsys.readouterr().out
+    assert "relighting mode: model lambert+ggx predicts held-out lights" in out
+    assert saved.exists()
+    picked = ["--scheme", "model", "--model", "lambert", "-k", "16", "--models", str(saved)]
+    assert main([*base, *picked, "-o", str(tmp_path / "lambert.exr")]) == 0
+    with OpenEXR.File(str(tmp_path / "lambert.exr"), separate_channels=True) as exr:
+        assert exr.channels()["A"].pixels.mean() > 0.2
+    saved.write_bytes(b"garbage")
+    assert main([*base, "--models", str(saved), "-o", str(tmp_path / "x.png")]) == 2
+    assert "not a readable models file" in capsys.readouterr().err

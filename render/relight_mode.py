@@ -1,0 +1,124 @@
+"""Which relighting a field gets: interpolation of its values, or its fitted per-sample models.
+
+Both engines, :class:`render.relighter.Relighter` (the paper's eq. 1-3 and our linear schemes)
+and :class:`render.model_relight.ModelRelighter`, take a lighting and a view and return a
+:class:`render.relighter.RelitImage`; :func:`open_relighter` makes the one a mode asks for.
+:func:`most_accurate_mode` decides between them on the field's own measurements: the error of
+predicting each measured light from the others (leave one light out), for the chosen model and
+for barycentric interpolation over the lights, so the decision works on real captures, where no
+ground truth exists.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Protocol
+
+from processing.panorama import Panorama
+from processing.reflectance_field import ReflectanceField
+from processing.sample_model_store import models_for_field
+from processing.sample_models import SampleModels, choose_model, interpolation_loo
+from render.model_relight import ModelRelighter, ModelRelightSettings
+from render.relighter import Relighter, RelightSettings, RelitImage, best_settings
+from rig.camera_model import PinholeCamera
+
+__all__ = [
+    "MOST_ACCURATE_MODELS",
+    "ModeChoice",
+    "RelightEngine",
+    "RelightMode",
+    "most_accurate_mode",
+    "open_relighter",
+]
+
+RelightMode = RelightSettings | ModelRelightSettings
+
+#: The model mode :func:`most_accurate_mode` picks: the model chosen by LOO, the panorama
+#: summed exactly into 64 x 128 blocks (docs/models.md: the sampled lights' discretisation,
+#: not the models, dominates the error of glossy objects at K = 256).
+MOST_ACCURATE_MODELS = ModelRelightSettings(model="auto", lighting="grid", grid_height=64)
+
+
+class RelightEngine(Protocol):
+    """What both relighting engines do."""
+
+    def set_lighting(
+        self, panorama: Panorama, *, yaw_deg: float = 0.0, exposure: float = 1.0
+    ) -> float: ...
+
+    def set_view(self, camera: PinholeCamera) -> float: ...
+
+    def render(self) -> RelitImage: ...
+
+
+def open_relighter(
+    field: ReflectanceField, mode: RelightMode, models: SampleModels | None = None
+) -> RelightEngine:
+    """The engine for ``mode``; a model mode fits ``field`` (or reads its saved fit) when
+    ``models`` is None."""
+    if isinstance(mode, ModelRelightSettings):
+        return ModelRelighter(
+            field, mode, models if models is not None else models_for_field(field)
+        )
+    return Relighter(field, mode)
+
+
+@dataclass(frozen=True)
+class ModeChoice:
+    """The relighting mode chosen for a field, and why.
+
+    Attributes
+    ----------
+    mode : RelightSettings or ModelRelightSettings
+    models : SampleModels, the field's fit
+    loo : dict of str to float, LOO relative RMSE of each predictor compared
+    reason : str, one sentence for the user
+    """
+
+    mode: RelightMode
+    models: SampleModels
+    loo: dict[str, float]
+    reason: str
+
+
+def most_accurate_mode(
+    field: ReflectanceField,
+    models: SampleModels | None = None,
+    *,
+    models_path: str | os.PathLike[str] | None = None,
+    progress: bool = False,
+) -> ModeChoice:
+    """Choose between per-sample models and interpolation by leave-one-light-out error.
+
+    Parameters
+    ----------
+    field : ReflectanceField
+    models : SampleModels, optional
+        Default: the fit saved at ``models_path`` (default beside the field), or a new fit
+        (saved there).
+    progress : bool, progress bars while fitting
+
+    Returns
+    -------
+    ModeChoice
+        ``MOST_ACCURATE_MODELS`` when the chosen model predicts held-out lights better than
+        barycentric interpolation does, else :func:`render.relighter.best_settings`.
+    """
+    linear = best_settings(field)
+    if models is None:
+        models = models_for_field(field, models_path, progress=progress)
+    chosen = choose_model(models).chosen
+    interpolated = interpolation_loo(field, linear.interpolation).relative_rmse
+    loo = {chosen: models.fits[chosen].loo.relative_rmse, linear.interpolation: interpolated}
+    if loo[chosen] < interpolated:
+        reason = (
+            f"model {chosen} predicts held-out lights with {loo[chosen]:.2%} error, "
+            f"{linear.interpolation} interpolation with {interpolated:.2%}"
+        )
+        return ModeChoice(MOST_ACCURATE_MODELS, models, loo, reason)
+    reason = (
+        f"{linear.interpolation} interpolation predicts held-out lights with {interpolated:.2%} "
+        f"error, the best model ({chosen}) with {loo[chosen]:.2%}"
+    )
+    return ModeChoice(linear, models, loo, reason)

@@ -1,0 +1,104 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from processing.reflectance_field import ReflectanceField
+from processing.rti import import_rti
+from processing.sample_model_store import (
+    default_models_path,
+    models_for_field,
+    read_sample_models,
+    write_sample_models,
+)
+from processing.sample_models import BasisFit, ParametricFit, SampleModels, fit_sample_models
+from rig.errors import DatasetError
+from sim.field import field_cameras, simulate_field
+
+RTI = Path(__file__).resolve().parents[3] / "shared" / "data" / "rti" / "loewenkopf" / "dirs.lp"
+
+
+def _simulated(tmp: Path, name: str, points: int, scene: str = "glossy-sphere") -> ReflectanceField:
+    path = tmp / f"{name}.zarr"
+    simulate_field(
+        path, scene, lights=8, cameras=field_cameras(4, width=32, height=32),
+        points=points,
+    )  # fmt: skip
+    return ReflectanceField.open(path)
+
+
+def _assert_same(a: SampleModels, b: SampleModels) -> None:
+    assert (a.kind, a.sample_count, list(a.fits)) == (b.kind, b.sample_count, list(b.fits))
+    np.testing.assert_array_equal(a.light_directions, b.light_directions)
+    np.testing.assert_array_equal(a.camera_frame, b.camera_frame)
+    for name, fit in a.fits.items():
+        other = b.fits[name]
+        np.testing.assert_array_equal(fit.loo.squared_error, other.loo.squared_error)
+        if isinstance(fit, ParametricFit):
+            assert isinstance(other, ParametricFit)
+            assert fit.normals_fitted == other.normals_fitted
+            for key in ("normals", "rho_d", "f0", "alpha", "lit", "fitted"):
+                np.testing.assert_array_equal(getattr(fit, key), getattr(other, key))
+        else:
+            assert isinstance(fit, BasisFit) and isinstance(other, BasisFit)
+            np.testing.assert_array_equal(fit.coefficients, other.coefficients)
+
+
+def test_a_point_fit_round_trips(tmp_path: Path) -> None:
+    field = _simulated(tmp_path, "a", 400)
+    models = fit_sample_models(field)
+    path = write_sample_models(tmp_path / "m.npz", models, field)
+    loaded = read_sample_models(path, field)
+    _assert_same(models, loaded)
+    np.testing.assert_array_equal(models.points, loaded.points)
+    assert loaded.view_direction is None and loaded.mark_directions is None
+
+
+def test_a_pixel_fit_round_trips(tmp_path: Path) -> None:
+    field = import_rti(RTI, tmp_path / "lion.zarr", progress=False)
+    models = fit_sample_models(field, ["lambert", "ptm"])
+    loaded = read_sample_models(write_sample_models(tmp_path / "m.npz", models, field), field)
+    _assert_same(models, loaded)
+    assert loaded.points is None and loaded.view_direction is not None
+
+
+def test_the_fit_is_saved_beside_the_field_and_reused(tmp_path: Path) -> None:
+    field = _simulated(tmp_path, "b", 300)
+    first = models_for_field(field)
+    saved = default_models_path(field.path)
+    assert saved == tmp_path / "b.zarr.models.npz" and saved.exists()
+    stamp = saved.stat().st_mtime_ns
+    _assert_same(first, models_for_field(field))
+    assert saved.stat().st_mtime_ns == stamp  # read, not fitted again
+    refit = models_for_field(field, models=["lambert"])  # held: no new fit
+    assert saved.stat().st_mtime_ns == stamp and "lambert" in refit.fits
+
+
+def test_a_fit_of_another_field_is_refused(tmp_path: Path) -> None:
+    one, other = _simulated(tmp_path, "one", 300), _simulated(tmp_path, "other", 301)
+    path = write_sample_models(tmp_path / "m.npz", fit_sample_models(one), one)
+    with pytest.raises(DatasetError, match="shape"):
+        read_sample_models(path, other)
+    same_shape = _simulated(tmp_path, "same", 300)
+    assert same_shape.shape == one.shape
+    read_sample_models(path, same_shape)  # same scene and layout: the same field
+    torus = _simulated(tmp_path, "torus", 300, "textured-torus")
+    assert torus.shape == one.shape
+    with pytest.raises(DatasetError, match="lights or points differ"):
+        read_sample_models(path, torus)
+
+
+@pytest.mark.parametrize("content", [b"not a zip", None])
+def test_broken_files_are_named(tmp_path: Path, content: bytes | None) -> None:
+    path = tmp_path / "m.npz"
+    if content is None:
+        np.savez(path, format=np.int64(99))
+        message = "format"
+    else:
+        path.write_bytes(content)
+        message = "not a readable models file"
+    with pytest.raises(DatasetError, match=message) as error:
+        read_sample_models(path)
+    assert str(path) in str(error.value)
