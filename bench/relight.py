@@ -13,7 +13,7 @@ import json
 import resource
 import time
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import partial
 from itertools import product
 from pathlib import Path
@@ -28,7 +28,10 @@ from numpy.typing import NDArray
 
 from processing.panorama import Panorama, panorama_from_array, read_panorama
 from processing.reflectance_field import ReflectanceField
+from processing.sample_model_store import models_for_field
+from processing.sample_models import SampleModels, choose_model, interpolation_loo
 from render.light_weights import pixel_light_weights
+from render.model_relight import ModelRelighter, ModelRelightSettings
 from render.relight import (
     blend_cameras,
     blend_field,
@@ -36,12 +39,14 @@ from render.relight import (
     relight_pixels_literal,
     relight_view,
 )
+from render.relight_mode import MOST_ACCURATE_MODELS, RelightEngine, RelightMode, open_relighter
 from render.relighter import Relighter, RelightSettings
 from render.splat import splat
 from rig.camera_model import PinholeCamera
 from sim.field import field_cameras, simulate_field
-from sim.ground_truth import render_environment
-from sim.scenes import build_scene, get_scene
+from sim.ground_truth import environment_lights, shade_environment
+from sim.scenes import SurfaceSamples, build_scene, get_scene
+from sim.synthetic_camera import SyntheticImage, camera_visibility, image_of_points
 
 PANORAMAS = Path(__file__).resolve().parents[2] / "shared" / "data" / "panoramas"
 
@@ -106,6 +111,18 @@ def bench_speed(out: Path, points: int, repeats: int, panorama: Panorama) -> dic
         )
     ]
     result["schemes"] = schemes
+    start = time.perf_counter()
+    models = models_for_field(field, progress=True)
+    result["model_fit_or_load_s"] = time.perf_counter() - start
+    result["model_schemes"] = [
+        _bench_model_scheme(field, models, settings, panorama, camera, repeats)
+        for settings in (
+            ModelRelightSettings(lighting="sampled", k=64),
+            ModelRelightSettings(lighting="sampled", k=256),
+            ModelRelightSettings(lighting="grid", grid_height=32),
+            MOST_ACCURATE_MODELS,
+        )
+    ]
     result["peak_rss_MB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     result["rss_growth_MB"] = (
         resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss_before
@@ -166,6 +183,46 @@ def _bench_scheme(
     }
 
 
+def _bench_model_scheme(
+    field: ReflectanceField,
+    models: SampleModels,
+    settings: ModelRelightSettings,
+    panorama: Panorama,
+    camera: PinholeCamera,
+    repeats: int,
+) -> dict[str, Any]:
+    """The interactive loop through per-sample models (no blended field: the models are it)."""
+    relighter = ModelRelighter(field, settings, models)
+    lighting_ms = _median_ms(lambda: relighter.set_lighting(panorama, yaw_deg=7.0), repeats)
+    relighter.set_view(camera)
+    relight_ms = _median_ms(lambda: relighter.render().seconds["relight"], repeats)
+    image = relighter.render()
+    yaws = iter(np.linspace(0.0, 360.0, 1000))
+    azimuths = iter(np.linspace(0.0, 360.0, 1000))
+
+    def new_lighting() -> None:
+        relighter.set_lighting(panorama, yaw_deg=float(next(yaws)))
+        relighter.render()
+
+    def new_view() -> None:
+        relighter.set_view(PinholeCamera(float(next(azimuths)), 50.0))
+        relighter.render()
+
+    return {
+        "scheme": "model",
+        "model": relighter.choice.chosen,
+        "lighting": settings.lighting,
+        "lights": settings.k if settings.lighting == "sampled" else 2 * settings.grid_height**2,
+        "lighting_ms": lighting_ms,
+        "render_ms": relight_ms,
+        "relight_ms": image.seconds["relight"] * 1e3,
+        "splat_ms": image.seconds["splat"] * 1e3,
+        "view_setup_ms": _median_ms(lambda: relighter.set_view(camera), 3),
+        "loop_new_lighting_ms": _median_ms(new_lighting, repeats),
+        "loop_new_view_ms": _median_ms(new_view, repeats),
+    }
+
+
 def _bench_equations(out: Path, panorama: Panorama) -> dict[str, Any]:
     """Literal eq. 2 against its rearranged form and eq. 3, at equal sizes, in one run."""
     field = ReflectanceField.open(_field(out, "glossy-sphere", 30, 30, 50_000, 256, "float32"))
@@ -212,7 +269,7 @@ def _between(cameras: list[PinholeCamera], index: int) -> PinholeCamera:
     return replace(cameras[index], azimuth_deg=(cameras[index].azimuth_deg + step / 2) % 360.0)
 
 
-ACCURACY_METHODS: dict[str, RelightSettings] = {
+ACCURACY_METHODS: dict[str, RelightMode] = {
     "paper (TMED on luminance, K=64, cosine 3x3, eq. 3)": RelightSettings.paper_configuration(64),
     "sampled K=256, barycentric": RelightSettings(
         scheme="sampled", k=256, interpolation="barycentric", view_interpolation="barycentric"
@@ -221,41 +278,63 @@ ACCURACY_METHODS: dict[str, RelightSettings] = {
         scheme="pixels", interpolation="barycentric", view_interpolation="barycentric"
     ),
     "projection": RelightSettings(scheme="projection", view_interpolation="barycentric"),
+    "models (LOO choice), grid 64": MOST_ACCURATE_MODELS,
+    "models (LOO choice), TMED K=256": ModelRelightSettings(lighting="sampled", k=256),
 }
 
-
-#: (S, T, points, image size): dense fields use fewer points (S = T = 400 would be 8 GB).
+#: (S, T, points, image size): dense fields use fewer points (S = T = 400 at 3 000 points is
+#: 160 000 slabs, 5.8 GB in float32).
 ACCURACY_FIELDS = [
     (10, 10, 20_000, 128),
     (20, 20, 20_000, 128),
     (30, 30, 20_000, 128),
     (100, 100, 4_000, 96),
     (30, 400, 4_000, 96),
+    (400, 400, 3_000, 96),
 ]
+#: Rows of the ground truth's panorama grid (a 64 x 128 pre-filter of the panorama).
+TRUTH_GRID = 64
 
 
 def _score(
-    field: ReflectanceField,
-    settings: RelightSettings,
-    panorama: Panorama,
-    camera: PinholeCamera,
-    truth: Any,
+    engine: RelightEngine, panorama: Panorama, camera: PinholeCamera, truth: Truth
 ) -> dict[str, Any]:
-    relighter = Relighter(field, settings)
-    relighter.set_lighting(panorama)
-    relighter.set_view(camera)
+    engine.set_lighting(panorama)
+    engine.set_view(camera)
     start = time.perf_counter()
-    image = relighter.render()
+    image = engine.render()
     seconds = time.perf_counter() - start
-    mask = image.coverage & truth.coverage
-    mse = float(np.mean((image.rgb[mask] - truth.rgb[mask]) ** 2))
-    peak = float(truth.rgb[mask].max())
+    mask = image.coverage & truth.image.coverage
+    mse = float(np.mean((image.rgb[mask] - truth.image.rgb[mask]) ** 2))
+    peak = float(truth.image.rgb[mask].max())
+    # The relit samples against the true ones: the relighting's error without the splatting's
+    # (the renderer estimates the point spacing, the simulator knows it; their splats differ).
+    shown = image.needed & truth.shown
     return {
-        "relative_rmse": _relative_rmse(image.rgb, truth.rgb, mask),
+        "relative_rmse": _relative_rmse(image.rgb, truth.image.rgb, mask),
+        "sample_relative_rmse": _relative_rmse(image.radiance, truth.radiance, shown),
         "psnr_db": 10 * np.log10(peak**2 / mse) if mse > 0 else None,
         "render_ms": seconds * 1e3,
         "outside_fraction": image.outside_fraction,
     }
+
+
+@dataclass(frozen=True)
+class Truth:
+    """The simulator's ground truth of one view: the image and every sample's radiance."""
+
+    image: SyntheticImage
+    radiance: NDArray[np.float64]
+    shown: NDArray[np.bool_]
+
+
+def _truth(
+    samples: SurfaceSamples, rgb: NDArray[np.float32], camera: PinholeCamera, shadows: bool
+) -> Truth:
+    directions, light = environment_lights(rgb, TRUTH_GRID)
+    radiance = shade_environment(samples, camera.position, directions, light, shadows=shadows)
+    image = image_of_points(samples, camera, radiance)
+    return Truth(image, radiance, camera_visibility(samples, camera))
 
 
 def _environments(name: str) -> dict[str, Panorama]:
@@ -265,29 +344,47 @@ def _environments(name: str) -> dict[str, Panorama]:
     return {"full": full, "upper": panorama_from_array(upper, source=name)}
 
 
-def bench_accuracy(out: Path, quick: bool) -> list[dict[str, Any]]:
-    """Relative RMSE and PSNR against the simulator's ground truth over covered pixels."""
+def _field_loo(field: ReflectanceField, models: SampleModels) -> dict[str, Any]:
+    """Leave-one-light-out errors of the field's models and of interpolation."""
+    choice = choose_model(models)
+    return {
+        "chosen_model": choice.chosen,
+        "loo": {row.name: row.loo_relative_rmse for row in choice.table}
+        | {"interpolation: barycentric": interpolation_loo(field, "barycentric").relative_rmse},
+    }
+
+
+def bench_accuracy(out: Path, quick: bool) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """Relative RMSE and PSNR against the simulator's ground truth over covered pixels.
+
+    Returns the rows (one per scene, panorama, field, view and method) and the per-field
+    leave-one-light-out table.
+    """
     rows: list[dict[str, Any]] = []
+    fields: list[dict[str, Any]] = []
     for scene in ("diffuse-sphere", "glossy-sphere", "textured-torus"):
         shadows = not get_scene(scene).convex
-        for name in ("courtyard.exr", "studio.exr"):
-            environments = _environments(name)
-            for cameras, lights, points, size in ACCURACY_FIELDS[2:3] if quick else ACCURACY_FIELDS:
-                samples = build_scene(scene, points)
-                path = _field(out, scene, cameras, lights, points, size, "float32")
-                field = ReflectanceField.open(path)
-                index = len(field.cameras) // 2
-                views = {
-                    "captured": field.cameras[index],
-                    "between": _between(field.cameras, index),
-                }
+        for cameras, lights, points, size in ACCURACY_FIELDS[2:3] if quick else ACCURACY_FIELDS:
+            samples = build_scene(scene, points)
+            path = _field(out, scene, cameras, lights, points, size, "float32")
+            field = ReflectanceField.open(path)
+            start = time.perf_counter()
+            models = models_for_field(field, progress=True)
+            loo = _field_loo(field, models) | {"fit_or_load_s": time.perf_counter() - start}
+            fields.append({"scene": scene, "S": cameras, "T": lights, "points": points} | loo)
+            print(f"{scene} S={cameras} T={lights}: LOO {loo['loo']}")
+            engines = {
+                method: open_relighter(field, mode, models)
+                for method, mode in ACCURACY_METHODS.items()
+            }
+            index = len(field.cameras) // 2
+            views = {"captured": field.cameras[index], "between": _between(field.cameras, index)}
+            for name in ("courtyard.exr", "studio.exr"):
                 for (env_name, panorama), (view_name, camera) in product(
-                    environments.items(), views.items()
+                    _environments(name).items(), views.items()
                 ):
-                    truth = render_environment(
-                        samples, panorama.rgb, camera, grid_height=32, shadows=shadows
-                    )
-                    for method, settings in ACCURACY_METHODS.items():
+                    truth = _truth(samples, panorama.rgb, camera, shadows)
+                    for method, engine in engines.items():
                         row = {
                             "scene": scene,
                             "panorama": name,
@@ -297,13 +394,62 @@ def bench_accuracy(out: Path, quick: bool) -> list[dict[str, Any]]:
                             "points": points,
                             "view": view_name,
                             "method": method,
-                        } | _score(field, settings, panorama, camera, truth)
+                        } | _score(engine, panorama, camera, truth)
                         rows.append(row)
                         print(
                             f"{scene:15s} {name:14s} {env_name:5s} S={cameras:<3d} "
-                            f"T={lights:<3d} {view_name:8s} {row['relative_rmse']:7.2%}  {method}"
+                            f"T={lights:<3d} {view_name:8s} {row['relative_rmse']:7.2%} "
+                            f"{row['sample_relative_rmse']:7.2%}  {method}"
                         )
-    return rows
+    return rows, fields
+
+
+def format_accuracy(rows: list[dict[str, Any]], view: str = "between") -> str:
+    """Markdown tables of relative RMSE at ``view``: one per field size, image (sample) %."""
+    lights = [("courtyard.exr", "full"), ("courtyard.exr", "upper"), ("studio.exr", "full"),
+              ("studio.exr", "upper")]  # fmt: skip
+    header = " | ".join(f"{p.removesuffix('.exr')} {e}" for p, e in lights)
+    out: list[str] = []
+    sizes = sorted({(r["S"], r["T"], r["points"]) for r in rows}, key=lambda k: (k[1], k[0]))
+    for cameras, count, points in sizes:
+        out += [f"S = {cameras}, T = {count}, {points} points, {view} view: relative RMSE, "
+                "image (samples)", "", f"| scene | method | {header} |",
+                "|---|---|" + "---|" * len(lights)]  # fmt: skip
+        chosen = [r for r in rows if (r["S"], r["T"], r["points"]) == (cameras, count, points)]
+        for scene in dict.fromkeys(r["scene"] for r in chosen):
+            for method in dict.fromkeys(r["method"] for r in chosen):
+                cells = []
+                for panorama, environment in lights:
+                    match = [
+                        r for r in chosen
+                        if (r["scene"], r["method"], r["panorama"], r["environment"], r["view"])
+                        == (scene, method, panorama, environment, view)
+                    ]  # fmt: skip
+                    cells.append(
+                        f"{match[0]['relative_rmse']:.2%} ({match[0]['sample_relative_rmse']:.2%})"
+                        if match
+                        else "-"
+                    )
+                out.append(f"| {scene} | {method} | " + " | ".join(cells) + " |")
+        out.append("")
+    return "\n".join(out)
+
+
+def format_loo(fields: list[dict[str, Any]]) -> str:
+    """A Markdown table of each field's leave-one-light-out errors."""
+    names = list(dict.fromkeys(name for f in fields for name in f["loo"]))
+    out = [
+        f"| scene | S | T | chosen | {' | '.join(names)} |",
+        "|---|---|---|---|" + "---|" * len(names),
+    ]
+    for f in fields:
+        cells = [f"{f['loo'][n]:.2%}" if n in f["loo"] else "-" for n in names]
+        out.append(
+            f"| {f['scene']} | {f['S']} | {f['T']} | {f['chosen_model']} | "
+            + " | ".join(cells)
+            + " |"
+        )
+    return "\n".join(out) + "\n"
 
 
 def _chart(results: dict[str, Any], path: Path) -> None:
@@ -347,8 +493,19 @@ def main(argv: list[str] | None = None) -> int:
         results["speed"] = bench_speed(args.output, points, args.repeats, panorama)
         print(json.dumps(results["speed"], indent=2))
     if args.only != "speed":
-        results["accuracy"] = bench_accuracy(args.output, args.quick)
+        results["accuracy"], results["leave_one_light_out"] = bench_accuracy(
+            args.output, args.quick
+        )
     target.write_text(json.dumps(results, indent=2) + "\n")
+    if "accuracy" in results:
+        tables = (
+            format_accuracy(results["accuracy"])
+            + "\n"
+            + format_accuracy(results["accuracy"], "captured")
+        )
+        loo = format_loo(results.get("leave_one_light_out", []))
+        (args.output / "relight-accuracy.md").write_text(tables + "\n" + loo)
+        print(tables + "\n" + loo)
     if "accuracy" in results:
         _chart(results, args.output / "relight.png")
     print(f"wrote {target}")

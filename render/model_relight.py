@@ -588,6 +588,7 @@ class ModelRelighter:
             rgb=rgb,
             coverage=coverage,
             radiance=radiance,
+            needed=needed,
             holes=needed & self._unfitted,
             outside_fraction=self._lighting.outside_fraction,
             seconds={"relight": relit - start, "splat": done - relit},

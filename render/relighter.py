@@ -81,13 +81,14 @@ class RelightSettings:
 
 
 def best_settings(field_store: ReflectanceField) -> RelightSettings:
-    """The most accurate configuration for a field, as measured on the simulator.
+    """The most accurate interpolation of a field's values, as measured on the simulator.
 
     Every panorama pixel as a light (eq. 2 over each normal's hemisphere) with barycentric
     interpolation over the measured lights and cameras: the lowest error of the linear schemes
-    in the accuracy study (docs/relighting.md).
+    in the accuracy study (docs/relighting.md). Whether per-sample models do better is decided
+    per field by :func:`render.relight_mode.most_accurate_mode`.
     """
-    del field_store  # every field supports it; kept for the per-sample models to come
+    del field_store  # every field supports it
     return RelightSettings(
         scheme="pixels", interpolation="barycentric", view_interpolation="barycentric"
     )
@@ -102,6 +103,7 @@ class RelitImage:
     rgb : ndarray, shape (H, W, 3), float32, linear radiance (0 where uncovered)
     coverage : ndarray, shape (H, W), bool
     radiance : ndarray, shape (P, 3), float32, relit samples (0 where not needed or holes)
+    needed : ndarray, shape (P,), bool, the samples this view shows (the ones relit)
     holes : ndarray, shape (P,), bool, needed samples no chosen camera sees
     outside_fraction : float, share of the light from outside the measured region
     seconds : dict, time of each stage of this frame
@@ -110,6 +112,7 @@ class RelitImage:
     rgb: NDArray[np.float32]
     coverage: NDArray[np.bool_]
     radiance: NDArray[np.float32]
+    needed: NDArray[np.bool_]
     holes: NDArray[np.bool_]
     outside_fraction: float
     seconds: dict[str, float] = field(default_factory=dict)
@@ -215,6 +218,7 @@ class Relighter:
             rgb=rgb,
             coverage=coverage,
             radiance=radiance,
+            needed=np.ones(len(radiance), dtype=bool) if plan is None else plan.visible,
             holes=blend.holes,
             outside_fraction=self._lighting.outside_fraction,
             seconds={"relight": relit - start, "splat": done - relit},
