@@ -1,0 +1,530 @@
+"""The rig config: devices, axes, limits, park pose, light, camera and forbidden zones (TOML).
+
+:func:`load_config` reads and validates a file; every problem is a :class:`ConfigError` naming
+the file, the key path and the value (unknown keys, wrong types, contradictory limits, unknown
+axis roles, duplicate servo ids, missing sections, a park pose outside the limits or in a
+forbidden zone). :meth:`RigConfig.to_toml` writes a config back, so the simulated rig can hand
+out a ready-to-use file. The keys, units and defaults are documented in ``docs/rig-config.md``;
+``docs/rig.example.toml`` is a commented example.
+
+Axis conversion (both devices): ``device = direction * scale * (rig_deg - offset_deg)``, with
+``scale = gear_ratio`` (servo degrees per rig degree) for a Dynamixel axis and
+``scale = units_per_deg`` (GRBL machine units per rig degree) for a GRBL axis.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Literal
+
+from rig.config_cameras import (
+    CameraConfig,
+    CameraFaultConfig,
+    GPhoto2CameraConfig,
+    OpenCVCameraConfig,
+    ReplayCameraConfig,
+    SimulatedCameraConfig,
+    camera_to_dict,
+    parse_camera,
+)
+from rig.config_schema import Table, dump_toml
+from rig.errors import ConfigError, InputError
+from rig.pose import REQUIRED_ROLES, ROLES, RigPose
+from rig.safety import ForbiddenZone, SafetyConfig, parse_safety, pose_violation, safety_to_dict
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "AxisConfig",
+    "CameraConfig",
+    "CameraFaultConfig",
+    "ForbiddenZone",
+    "GPhoto2CameraConfig",
+    "GantryConfig",
+    "LightConfig",
+    "OpenCVCameraConfig",
+    "ReplayCameraConfig",
+    "RigConfig",
+    "SafetyConfig",
+    "ServoChainConfig",
+    "SimulatedCameraConfig",
+    "load_config",
+    "parse_config",
+    "simulated_config",
+]
+
+SCHEMA_VERSION = 1
+#: Dynamixel model number of the XM430-W350 (the control table of issue 5).
+XM430_W350 = 1020
+_SERVO_KEYS = ("servo_id", "gear_ratio", "velocity_deg_s")
+_GRBL_KEYS = ("grbl_axis", "units_per_deg", "feed_deg_min")
+
+
+@dataclass(frozen=True)
+class ServoChainConfig:
+    """The Dynamixel chain's serial port (``[servos]``)."""
+
+    port: str
+    baudrate: int = 57_600
+    model_number: int = XM430_W350
+
+    def __post_init__(self) -> None:
+        _check(bool(self.port), "servos.port", self.port, "must name a serial device")
+        _check(self.baudrate > 0, "servos.baudrate", self.baudrate, "must be positive")
+
+
+@dataclass(frozen=True)
+class GantryConfig:
+    """The GRBL controller's serial port (``[gantry]``) and its operator choices."""
+
+    port: str
+    baudrate: int = 115_200
+    homing: bool = False  # run $H on connect (the controller must have $22=1)
+    unlock_on_alarm: bool = False  # send $X after an alarm without asking the operator
+
+    def __post_init__(self) -> None:
+        _check(bool(self.port), "gantry.port", self.port, "must name a serial device")
+        _check(self.baudrate > 0, "gantry.baudrate", self.baudrate, "must be positive")
+
+
+@dataclass(frozen=True)
+class AxisConfig:
+    """One axis (``[axes.<role>]``): which device drives it, conversion, limits and speed.
+
+    ``servo_id``, ``gear_ratio`` and ``velocity_deg_s`` apply to Dynamixel axes; ``grbl_axis``,
+    ``units_per_deg`` and ``feed_deg_min`` to GRBL axes.
+    """
+
+    role: str
+    device: Literal["dynamixel", "grbl"]
+    min_deg: float
+    max_deg: float
+    servo_id: int | None = None
+    grbl_axis: str | None = None
+    offset_deg: float = 0.0
+    direction: int = 1
+    gear_ratio: float = 1.0
+    units_per_deg: float = 1.0
+    velocity_deg_s: float = 30.0
+    acceleration_deg_s2: float = 60.0
+    feed_deg_min: float = 1800.0
+
+    def __post_init__(self) -> None:
+        key = f"axes.{self.role}"
+        if self.role not in ROLES:
+            raise ConfigError(f"unknown axis role {key}; roles are {', '.join(ROLES)}")
+        _check(
+            self.device in ("dynamixel", "grbl"),
+            f"{key}.device",
+            self.device,
+            "is not 'dynamixel' or 'grbl'",
+        )
+        _check(
+            self.min_deg < self.max_deg,
+            f"{key}.min_deg",
+            self.min_deg,
+            f"is not below max_deg = {self.max_deg!r}",
+        )
+        _check(self.direction in (1, -1), f"{key}.direction", self.direction, "must be 1 or -1")
+        _check(
+            self.acceleration_deg_s2 > 0,
+            f"{key}.acceleration_deg_s2",
+            self.acceleration_deg_s2,
+            "must be positive",
+        )
+        if self.device == "dynamixel":
+            _check(
+                self.servo_id is not None,
+                f"{key}.servo_id",
+                None,
+                "is required for a dynamixel axis",
+            )
+            # 253 is reserved and 254 is the broadcast id in Protocol 2.0.
+            _check(
+                0 <= (self.servo_id or 0) <= 252,
+                f"{key}.servo_id",
+                self.servo_id,
+                "must be in 0..252",
+            )
+            _check(
+                self.grbl_axis is None,
+                f"{key}.grbl_axis",
+                self.grbl_axis,
+                "does not apply to a dynamixel axis",
+            )
+            _check(self.gear_ratio > 0, f"{key}.gear_ratio", self.gear_ratio, "must be positive")
+            _check(
+                self.velocity_deg_s > 0,
+                f"{key}.velocity_deg_s",
+                self.velocity_deg_s,
+                "must be positive",
+            )
+        else:
+            _check(
+                self.grbl_axis in ("X", "Y", "Z"),
+                f"{key}.grbl_axis",
+                self.grbl_axis,
+                "must be 'X', 'Y' or 'Z'",
+            )
+            _check(
+                self.servo_id is None,
+                f"{key}.servo_id",
+                self.servo_id,
+                "does not apply to a grbl axis",
+            )
+            _check(
+                self.units_per_deg > 0,
+                f"{key}.units_per_deg",
+                self.units_per_deg,
+                "must be positive (use direction = -1 to reverse)",
+            )
+            _check(
+                self.feed_deg_min > 0, f"{key}.feed_deg_min", self.feed_deg_min, "must be positive"
+            )
+
+    @property
+    def scale(self) -> float:
+        """Device units (servo degrees or GRBL machine units) per rig degree, signed."""
+        return self.direction * (
+            self.gear_ratio if self.device == "dynamixel" else self.units_per_deg
+        )
+
+    def to_device(self, rig_deg: float) -> float:
+        """Rig degrees to the device's position (servo degrees or GRBL machine units)."""
+        return self.scale * (rig_deg - self.offset_deg)
+
+    def from_device(self, device_position: float) -> float:
+        """The device's position back to rig degrees."""
+        return device_position / self.scale + self.offset_deg
+
+    def within_limits(self, rig_deg: float) -> bool:
+        return self.min_deg <= rig_deg <= self.max_deg
+
+
+@dataclass(frozen=True)
+class LightConfig:
+    """How GRBL switches the light (``[light]``): spindle PWM (M3 S / M5) or coolant (M8 / M9)."""
+
+    control: Literal["spindle", "coolant"] = "spindle"
+    max_s: float = 1000.0  # spindle: the S word of full intensity (GRBL $30)
+    settle_s: float = 0.0  # wait after switching before an image is taken
+
+    def __post_init__(self) -> None:
+        _check(
+            self.control in ("spindle", "coolant"),
+            "light.control",
+            self.control,
+            "is not 'spindle' or 'coolant'",
+        )
+        _check(self.max_s > 0, "light.max_s", self.max_s, "must be positive")
+        _check(self.settle_s >= 0, "light.settle_s", self.settle_s, "must be >= 0")
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """A whole rig. Construction validates everything that depends on more than one key.
+
+    Attributes
+    ----------
+    axes : dict of role -> AxisConfig
+        The four required roles, and ``turntable`` when the rig has one.
+    servos, gantry : the serial devices; present exactly when an axis (or the light) needs them
+    light, camera, safety : see their classes
+    park : RigPose, where the rig rests between sessions and after an error
+    source : Path or None, the file it was read from (not compared)
+    """
+
+    axes: dict[str, AxisConfig]
+    park: RigPose
+    camera: CameraConfig
+    servos: ServoChainConfig | None = None
+    gantry: GantryConfig | None = None
+    light: LightConfig = field(default_factory=LightConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    name: str = "rig"
+    source: Path | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        for role, axis in self.axes.items():
+            _check(role == axis.role, f"axes.{role}.role", axis.role, f"does not match {role!r}")
+        missing = [role for role in REQUIRED_ROLES if role not in self.axes]
+        if missing:
+            raise ConfigError(
+                f"section [axes.{missing[0]}] is missing (every rig has "
+                f"{', '.join(REQUIRED_ROLES)})"
+            )
+        devices = {axis.device for axis in self.axes.values()}
+        if "dynamixel" in devices and self.servos is None:
+            raise ConfigError("section [servos] is missing; the dynamixel axes need its port")
+        if self.gantry is None:
+            raise ConfigError("section [gantry] is missing; the light is switched through GRBL")
+        _unique(self.axes, "servo_id", "dynamixel servo id")
+        _unique(self.axes, "grbl_axis", "GRBL axis letter")
+        for role, value in self.park.items():
+            limits = self.axes.get(role)
+            if limits is None:
+                _check(value == 0.0, f"park.{role}_deg", value, f"needs an [axes.{role}] section")
+            elif not limits.within_limits(value):
+                raise ConfigError(
+                    f"park.{role}_deg = {value!r} is outside the limits of axes.{role} "
+                    f"[{limits.min_deg!r}, {limits.max_deg!r}]"
+                )
+        problem = pose_violation(self, self.park)
+        if problem:
+            raise ConfigError(f"the park pose is not safe: {problem}")
+
+    def axes_of(self, device: str) -> dict[str, AxisConfig]:
+        """The axes driven by ``device`` ("dynamixel" or "grbl"), by role."""
+        return {role: axis for role, axis in self.axes.items() if axis.device == device}
+
+    def resolve(self, path: str | os.PathLike[str]) -> Path:
+        """A path from the config, relative to the config file's folder when it has one."""
+        candidate = Path(path).expanduser()
+        if candidate.is_absolute() or self.source is None:
+            return candidate
+        return self.source.parent / candidate
+
+    def to_dict(self) -> dict[str, Any]:
+        """The config as the nested tables of its TOML form (None values left out)."""
+        document: dict[str, Any] = {"schema_version": SCHEMA_VERSION, "name": self.name}
+        for section, value in (("servos", self.servos), ("gantry", self.gantry)):
+            if value is not None:
+                document[section] = {f.name: getattr(value, f.name) for f in fields(value)}
+        document["axes"] = {role: _axis_to_dict(axis) for role, axis in self.axes.items()}
+        document["park"] = {
+            f"{role}_deg": value
+            for role, value in self.park.items()
+            if role in self.axes or value != 0.0
+        }
+        document["light"] = _light_to_dict(self.light)
+        document["camera"] = camera_to_dict(self.camera)
+        document["safety"] = safety_to_dict(self.safety)
+        return document
+
+    def to_toml(self) -> str:
+        """The config as TOML text that :func:`parse_config` reads back equal."""
+        header = f"# Rig config {self.name!r} (schema {SCHEMA_VERSION}); see docs/rig-config.md\n"
+        return header + dump_toml(self.to_dict())
+
+
+def _check(ok: bool, key: str, value: object, problem: str) -> None:
+    if not ok:
+        raise ConfigError(f"{key} = {value!r} {problem}")
+
+
+def _unique(axes: Mapping[str, AxisConfig], attribute: str, what: str) -> None:
+    seen: dict[object, str] = {}
+    for role, axis in axes.items():
+        value = getattr(axis, attribute)
+        if value is None:
+            continue
+        if value in seen:
+            raise ConfigError(
+                f"duplicate {what} {value!r}: axes.{seen[value]}.{attribute} and "
+                f"axes.{role}.{attribute}"
+            )
+        seen[value] = role
+
+
+def _axis_to_dict(axis: AxisConfig) -> dict[str, Any]:
+    skip = {"role", *(_GRBL_KEYS if axis.device == "dynamixel" else _SERVO_KEYS)}
+    return {f.name: getattr(axis, f.name) for f in fields(axis) if f.name not in skip}
+
+
+def _light_to_dict(light: LightConfig) -> dict[str, Any]:
+    document: dict[str, Any] = {"control": light.control, "settle_s": light.settle_s}
+    if light.control == "spindle":
+        document["max_s"] = light.max_s
+    return document
+
+
+def _parse_axis(table: Table, role: str) -> AxisConfig:
+    device = table.string("device", choices=("dynamixel", "grbl"))
+    foreign = _GRBL_KEYS if device == "dynamixel" else _SERVO_KEYS
+    for name in foreign:
+        if table.has(name):
+            raise ConfigError(f"{table.key(name)} does not apply to a {device} axis")
+    values: dict[str, Any] = {
+        "min_deg": table.number("min_deg"),
+        "max_deg": table.number("max_deg"),
+        "offset_deg": table.number("offset_deg", 0.0),
+        "direction": table.integer("direction", 1),
+        "acceleration_deg_s2": table.number("acceleration_deg_s2", 60.0),
+    }
+    if device == "dynamixel":
+        values["servo_id"] = table.integer("servo_id")
+        values["gear_ratio"] = table.number("gear_ratio", 1.0)
+        values["velocity_deg_s"] = table.number("velocity_deg_s", 30.0)
+    else:
+        values["grbl_axis"] = table.string("grbl_axis", choices=("X", "Y", "Z"))
+        values["units_per_deg"] = table.number("units_per_deg", 1.0)
+        values["feed_deg_min"] = table.number("feed_deg_min", 1800.0)
+    table.finish()
+    return AxisConfig(role=role, device=device, **values)
+
+
+def _parse_port(table: Table, cls: type[Any], baudrate: int, **extra: Any) -> Any:
+    return cls(port=table.string("port"), baudrate=table.integer("baudrate", baudrate), **extra)
+
+
+def _parse(root: Table, source: Path | None) -> RigConfig:
+    version = root.integer("schema_version", SCHEMA_VERSION)
+    _check(
+        version == SCHEMA_VERSION,
+        "schema_version",
+        version,
+        f"is not supported (this program reads {SCHEMA_VERSION})",
+    )
+    name = root.string("name", "rig")
+    servos_table = root.table("servos", required=False)
+    servos = None
+    if servos_table is not None:
+        servos = _parse_port(
+            servos_table,
+            ServoChainConfig,
+            57_600,
+            model_number=servos_table.integer("model_number", XM430_W350),
+        )
+        servos_table.finish()
+    gantry_table = root.table("gantry", required=False)
+    gantry = None
+    if gantry_table is not None:
+        gantry = _parse_port(
+            gantry_table,
+            GantryConfig,
+            115_200,
+            homing=gantry_table.boolean("homing", False),
+            unlock_on_alarm=gantry_table.boolean("unlock_on_alarm", False),
+        )
+        gantry_table.finish()
+    axes_table = root.table("axes")
+    assert axes_table is not None
+    axes: dict[str, AxisConfig] = {}
+    for role in axes_table.keys():
+        if role not in ROLES:
+            raise ConfigError(f"unknown axis role axes.{role}; roles are {', '.join(ROLES)}")
+        sub = axes_table.table(role)
+        assert sub is not None
+        axes[role] = _parse_axis(sub, role)
+    axes_table.finish()
+    park_table = root.table("park")
+    assert park_table is not None
+    park_roles = {role: park_table.number(f"{role}_deg") for role in REQUIRED_ROLES}
+    if park_table.has("turntable_deg") or "turntable" in axes:
+        park_roles["turntable"] = park_table.number("turntable_deg", 0.0)
+    park_table.finish()
+    light_table = root.table("light", required=False) or Table({}, "light")
+    control = light_table.string("control", "spindle", choices=("spindle", "coolant"))
+    if control == "coolant" and light_table.has("max_s"):
+        raise ConfigError("light.max_s does not apply to coolant control (on/off only)")
+    light = LightConfig(
+        control=control,
+        max_s=light_table.number("max_s", 1000.0),
+        settle_s=light_table.number("settle_s", 0.0),
+    )
+    light_table.finish()
+    camera_table = root.table("camera")
+    assert camera_table is not None
+    camera = parse_camera(camera_table)
+    safety = parse_safety(root.table("safety", required=False) or Table({}, "safety"))
+    root.finish()
+    return RigConfig(
+        axes=axes,
+        park=RigPose.from_roles(park_roles),
+        camera=camera,
+        servos=servos,
+        gantry=gantry,
+        light=light,
+        safety=safety,
+        name=name,
+        source=source,
+    )
+
+
+def parse_config(
+    data: Mapping[str, Any], source: str | os.PathLike[str] | None = None
+) -> RigConfig:
+    """Validate parsed TOML tables and build the config.
+
+    Parameters
+    ----------
+    data : mapping, what ``tomllib`` returns
+    source : path of the file, used in messages and to resolve relative paths
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, the key path and the value.
+    """
+    where = str(source) if source is not None else "<rig config>"
+    try:
+        return _parse(Table(data), Path(source) if source is not None else None)
+    except InputError as error:  # ConfigError, or a value refused by a shared dataclass
+        raise ConfigError(f"{where}: {error}") from None
+
+
+def load_config(path: str | os.PathLike[str]) -> RigConfig:
+    """Read and validate a rig config file (TOML); see ``docs/rig-config.md``."""
+    target = Path(path)
+    try:
+        text = target.read_text(encoding="utf-8")
+    except OSError as error:
+        raise ConfigError(f"{target}: cannot read the rig config ({error.strerror})") from None
+    except UnicodeDecodeError as error:
+        raise ConfigError(f"{target}: the rig config is not UTF-8 text ({error})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(f"{target}: not valid TOML: {error}") from None
+    return parse_config(data, target)
+
+
+def simulated_config(
+    servo_port: str, gantry_port: str, *, scene: str = "glossy-sphere", name: str = "simulated rig"
+) -> RigConfig:
+    """A ready-to-use config for the simulated rig on the given serial devices.
+
+    Camera arm on Dynamixel ids 1 (azimuth) and 2 (inclination), light on GRBL X (azimuth) and
+    Y (inclination) at one machine unit per degree, spindle PWM light, simulated camera.
+    """
+
+    def servo(role: str, servo_id: int, min_deg: float, max_deg: float) -> AxisConfig:
+        return AxisConfig(
+            role,
+            "dynamixel",
+            min_deg,
+            max_deg,
+            servo_id=servo_id,
+            velocity_deg_s=90.0,
+            acceleration_deg_s2=360.0,
+        )
+
+    def grbl(role: str, letter: str, min_deg: float, max_deg: float) -> AxisConfig:
+        return AxisConfig(
+            role,
+            "grbl",
+            min_deg,
+            max_deg,
+            grbl_axis=letter,
+            feed_deg_min=6000.0,
+            acceleration_deg_s2=360.0,
+        )
+
+    axes = {
+        "camera_azimuth": servo("camera_azimuth", 1, -180.0, 180.0),
+        "camera_inclination": servo("camera_inclination", 2, 0.0, 90.0),
+        "light_azimuth": grbl("light_azimuth", "X", -180.0, 180.0),
+        "light_inclination": grbl("light_inclination", "Y", 0.0, 90.0),
+    }
+    return RigConfig(
+        axes=axes,
+        park=RigPose(0.0, 0.0, 180.0, 45.0),
+        camera=SimulatedCameraConfig(scene=scene),
+        servos=ServoChainConfig(port=servo_port),
+        gantry=GantryConfig(port=gantry_port),
+        safety=SafetyConfig(min_separation_deg=10.0),
+        name=name,
+    )
