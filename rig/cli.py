@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from rig.cli_rig import add_doctor, add_sim_start
 from rig.errors import RigError
 
 __all__ = ["build_parser", "main"]
@@ -325,6 +326,7 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     )
     scenes.add_argument("--json", action="store_true", help="print a JSON list")
     scenes.set_defaults(handler=_run_sim_scenes)
+    add_sim_start(sim_commands)
 
     render = sim_commands.add_parser(
         "render",
@@ -541,6 +543,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sample(commands)
     _add_demo(commands)
     _add_relight(commands)
+    add_doctor(commands)
     _add_sim(commands)
     return parser
 

@@ -513,10 +513,11 @@ def simulated_config(
             acceleration_deg_s2=360.0,
         )
 
+    # Azimuths run 0..359 as sweep plans count them; a servo turn holds 0..360 from tick 0.
     axes = {
-        "camera_azimuth": servo("camera_azimuth", 1, -180.0, 180.0),
+        "camera_azimuth": servo("camera_azimuth", 1, 0.0, 359.0),
         "camera_inclination": servo("camera_inclination", 2, 0.0, 90.0),
-        "light_azimuth": grbl("light_azimuth", "X", -180.0, 180.0),
+        "light_azimuth": grbl("light_azimuth", "X", 0.0, 360.0),
         "light_inclination": grbl("light_inclination", "Y", 0.0, 90.0),
     }
     return RigConfig(

@@ -117,6 +117,7 @@ class GrblEmulator:
     settings : overrides of GRBL's defaults (``{22: 1, 110: 36000, ...}``)
     faults : fault injection (none by default)
     rx_buffer_size : GRBL's serial receive buffer, 128 bytes on the Uno
+    position : machine position at power-up, machine units
     """
 
     def __init__(
@@ -125,6 +126,7 @@ class GrblEmulator:
         settings: Mapping[int, float] | None = None,
         faults: GrblFaults | None = None,
         rx_buffer_size: int = 128,
+        position: tuple[float, float, float] = (0.0, 0.0, 0.0),
     ) -> None:
         self.faults = faults or GrblFaults()
         self.rx_buffer_size = rx_buffer_size
@@ -152,7 +154,10 @@ class GrblEmulator:
         self._garbage = _Fault(self.faults.garbage, seed, "garbage")
         self._noise_rng = random.Random(f"{seed}:noise")
         self._machine = GrblMachine(
-            settings, self._emit, hard_limit_after_moves=self.faults.hard_limit_after_moves
+            settings,
+            self._emit,
+            hard_limit_after_moves=self.faults.hard_limit_after_moves,
+            position=position,
         )
 
     # -- life cycle -------------------------------------------------------------------------

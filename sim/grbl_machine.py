@@ -216,6 +216,8 @@ class GrblMachine:
     emit : ``emit(text, kind, source)`` receives every output line
     hard_limit_after_moves : raise ALARM:1 half-way through this motion block (1-based count
         since start; fault injection), or None
+    position : machine position at power-up (where the gantry was left; GRBL does not know it
+        until homed, and takes it as is)
     """
 
     def __init__(
@@ -224,6 +226,7 @@ class GrblMachine:
         emit: Emit,
         *,
         hard_limit_after_moves: int | None = None,
+        position: Vec = (0.0, 0.0, 0.0),
     ) -> None:
         self.settings = dict(DEFAULT_SETTINGS)
         self.settings.update({int(k): float(v) for k, v in (settings or {}).items()})
@@ -237,7 +240,7 @@ class GrblMachine:
         self.mist = False
         self.pins = ""
         self.moves_started = 0
-        self._position: Vec = (0.0, 0.0, 0.0)
+        self._position: Vec = position
         self._planner: deque[_Block] = deque()
         self._steps: deque[Step] = deque()
         self._source = ""

@@ -1,0 +1,331 @@
+"""The whole rig of a config: the camera arm's servos, the light gantry and its light, a camera.
+
+:class:`Rig` is what a capture session drives: ``move_to(RigPose)`` checks the pose and the
+straight path to it against the config's limits and forbidden zones before any byte is sent,
+then moves the servo chain and the gantry together and waits for both; ``light_on`` /
+``light_off``; ``capture``; ``park``. Leaving it (``with Rig(...)``, or ``close()``) switches
+the light off, stops motion and takes the servos' torque off on every path, errors included.
+
+The device adapters :class:`ServoArm` and :class:`LightGantry` give the drivers
+(:mod:`rig.dynamixel`, :mod:`rig.grbl`) the role-addressed interface of
+:class:`rig.devices.PoseAxes`, converting rig degrees with each axis' config.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Mapping
+from types import TracebackType
+
+from rig.config import XM430_W350, AxisConfig, RigConfig
+from rig.devices import Camera, Frame, LightState
+from rig.dynamixel import DynamixelChain, ServoAxisConfig
+from rig.errors import DeviceError, InputError, RigError
+from rig.grbl import GantryAxes, GantryAxisConfig, GrblGantry
+from rig.pose import RigPose
+from rig.safety import check_path, check_pose
+
+__all__ = ["LightGantry", "Rig", "ServoArm", "gantry_axis", "servo_axis"]
+
+#: Extra time a move may take beyond the slowest axis' trapezoid (controller latency, polling).
+MOVE_MARGIN_S = 5.0
+
+
+def servo_axis(axis: AxisConfig, model_number: int = XM430_W350) -> ServoAxisConfig:
+    """The driver's view of a Dynamixel axis of the config.
+
+    The config counts servo degrees from the servo's tick 0 (``device = scale (rig -
+    offset)``); the driver's offset is the rig angle at the centre tick (180 servo degrees).
+    """
+    if axis.servo_id is None:
+        raise InputError(f"axes.{axis.role} is not a dynamixel axis")
+    return ServoAxisConfig(
+        id=axis.servo_id,
+        role=axis.role,
+        offset_deg=axis.from_device(180.0),
+        direction=axis.direction,
+        gear_ratio=axis.gear_ratio,
+        min_deg=axis.min_deg,
+        max_deg=axis.max_deg,
+        velocity_deg_s=axis.velocity_deg_s,
+        acceleration_deg_s2=axis.acceleration_deg_s2,
+        model_number=model_number,
+    )
+
+
+def gantry_axis(axis: AxisConfig) -> GantryAxisConfig:
+    """The driver's view of a GRBL axis of the config."""
+    if axis.grbl_axis not in ("X", "Y", "Z"):
+        raise InputError(f"axes.{axis.role} is not a GRBL axis")
+    return GantryAxisConfig(
+        letter=axis.grbl_axis,  # type: ignore[arg-type]
+        min_deg=axis.min_deg,
+        max_deg=axis.max_deg,
+        offset_deg=axis.offset_deg,
+        direction=1 if axis.direction > 0 else -1,
+        units_per_deg=axis.units_per_deg,
+    )
+
+
+def _move_seconds(distance_deg: float, velocity: float, acceleration: float) -> float:
+    """Duration of a trapezoidal (or triangular) move from rest to rest."""
+    ramp = velocity / acceleration
+    if distance_deg < velocity * ramp:
+        return 2.0 * (distance_deg / acceleration) ** 0.5
+    return distance_deg / velocity + ramp
+
+
+class ServoArm:
+    """The Dynamixel axes of a config (the camera arm, a turntable) as :class:`PoseAxes`."""
+
+    def __init__(self, config: RigConfig) -> None:
+        if config.servos is None:
+            raise InputError("the rig config has no [servos] section")
+        self._axes = config.axes_of("dynamixel")
+        self.chain = DynamixelChain(
+            config.servos.port,
+            config.servos.baudrate,
+            [servo_axis(a, config.servos.model_number) for a in self._axes.values()],
+        )
+
+    @property
+    def roles(self) -> tuple[str, ...]:
+        return tuple(self._axes)
+
+    def connect(self) -> None:
+        self.chain.connect()
+
+    def move_to_deg(self, targets: Mapping[str, float]) -> None:
+        self.chain.move_many_deg(targets, wait=False)
+
+    def wait_until_arrived(self, timeout_s: float) -> None:
+        self.chain.wait_until_arrived(self.roles, timeout_s)
+
+    def position_deg(self) -> dict[str, float]:
+        return self.chain.positions_deg()
+
+    def seconds_to(self, start: Mapping[str, float], end: Mapping[str, float]) -> float:
+        """Time the slowest axis needs for the move (its profile), seconds."""
+        return max(
+            (
+                _move_seconds(abs(end[r] - start[r]), a.velocity_deg_s, a.acceleration_deg_s2)
+                for r, a in self._axes.items()
+                if r in end
+            ),
+            default=0.0,
+        )
+
+    def stop(self) -> None:
+        # Holding the present position is the servos' stop: the goal becomes where they are
+        # (kept inside the soft limits, which a servo may overshoot by a tick).
+        here = self.chain.positions_deg()
+        self.chain.move_many_deg(
+            {r: min(max(v, self._axes[r].min_deg), self._axes[r].max_deg) for r, v in here.items()},
+            wait=False,
+        )
+
+    def close(self) -> None:
+        self.chain.close()
+
+
+class LightGantry:
+    """The GRBL gantry of a config: light azimuth and inclination, and the light."""
+
+    def __init__(self, config: RigConfig) -> None:
+        gantry = config.gantry
+        if gantry is None:
+            raise InputError("the rig config has no [gantry] section")
+        axes = config.axes_of("grbl")
+        missing = {"light_azimuth", "light_inclination"} - set(axes)
+        if missing:
+            raise InputError(
+                f"the light gantry drives light_azimuth and light_inclination; "
+                f"{', '.join(sorted(missing))} is not a grbl axis in the config"
+            )
+        self._azimuth, self._inclination = axes["light_azimuth"], axes["light_inclination"]
+        self.homing = gantry.homing
+        self.settle_s = config.light.settle_s
+        self.gantry = GrblGantry(
+            gantry.port,
+            gantry.baudrate,
+            GantryAxes(gantry_axis(self._azimuth), gantry_axis(self._inclination)),
+            light=config.light.control,
+            feed_deg_min=min(self._azimuth.feed_deg_min, self._inclination.feed_deg_min),
+            unlock_on_connect=gantry.unlock_on_alarm,
+        )
+        self.light = LightState()
+
+    @property
+    def roles(self) -> tuple[str, ...]:
+        return ("light_azimuth", "light_inclination")
+
+    def connect(self) -> None:
+        self.gantry.connect()
+        if self.homing:
+            self.gantry.home()
+
+    def move_to_deg(self, targets: Mapping[str, float]) -> None:
+        here = self.position_deg()
+        azimuth = targets.get("light_azimuth", here["light_azimuth"])
+        inclination = targets.get("light_inclination", here["light_inclination"])
+        self.gantry.move_to_deg(azimuth, inclination, wait=False)
+
+    def wait_until_arrived(self, timeout_s: float) -> None:
+        self.gantry.wait_until_idle(timeout_s)
+
+    def position_deg(self) -> dict[str, float]:
+        azimuth, inclination = self.gantry.position_deg()
+        return {"light_azimuth": azimuth, "light_inclination": inclination}
+
+    def seconds_to(self, start: Mapping[str, float], end: Mapping[str, float]) -> float:
+        """Time of the straight move at the configured feed, seconds (acceleration ignored)."""
+        distance = sum((end.get(r, start[r]) - start[r]) ** 2 for r in self.roles) ** 0.5
+        return 60.0 * distance / self.gantry.feed_deg_min
+
+    def light_on(self, intensity: float = 1.0) -> None:
+        self.gantry.light_on(intensity)
+        self.light = LightState(True, intensity)
+        time.sleep(self.settle_s)
+
+    def light_off(self) -> None:
+        self.gantry.light_off()
+        self.light = LightState()
+        time.sleep(self.settle_s)
+
+    def stop(self) -> None:
+        self.gantry.safe_stop()
+
+    def close(self) -> None:
+        try:
+            self.gantry.safe_stop()
+        finally:
+            self.light = LightState()
+            self.gantry.close()
+
+
+class Rig:
+    """A rig config's devices, driven in rig poses.
+
+    Parameters
+    ----------
+    config : RigConfig
+    camera : Camera, optional; the frames of :meth:`capture` (a rig can move without one)
+    """
+
+    def __init__(self, config: RigConfig, camera: Camera | None = None) -> None:
+        self.config = config
+        self.camera = camera
+        self.arm = ServoArm(config) if config.axes_of("dynamixel") else None
+        self.gantry = LightGantry(config)
+        self._connected = False
+
+    @property
+    def devices(self) -> tuple[ServoArm | LightGantry, ...]:
+        return (self.gantry,) if self.arm is None else (self.arm, self.gantry)
+
+    def connect(self) -> None:
+        """Connect every device; on a failure the ones already connected are closed."""
+        try:
+            if self.arm is not None:
+                self.arm.connect()
+            self.gantry.connect()
+            self.gantry.light_off()
+        except BaseException:
+            self.close()
+            raise
+        self._connected = True
+
+    def __enter__(self) -> Rig:
+        self.connect()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if exc is None:
+            self.close()
+            return
+        try:
+            self.close()
+        except RigError as error:  # the error that got us here matters more; keep both
+            exc.add_note(str(error))
+
+    def close(self) -> None:
+        """Light off, motion stopped, torque off, ports closed; every step is attempted."""
+        problems: list[str] = []
+        for step in (self.gantry.close, *(() if self.arm is None else (self.arm.close,))):
+            try:
+                step()
+            except RigError as error:
+                problems.append(str(error))
+        if self.camera is not None:
+            with contextlib.suppress(RigError):
+                self.camera.close()
+        self._connected = False
+        if problems:
+            raise DeviceError("closing the rig: " + "; ".join(problems))
+
+    def pose(self) -> RigPose:
+        """The measured pose of every axis."""
+        positions: dict[str, float] = {}
+        for device in self.devices:
+            positions.update(device.position_deg())
+        return RigPose.from_roles(positions)
+
+    def state(self) -> tuple[RigPose, LightState]:
+        """The measured pose and the light: the simulated camera's view of the rig."""
+        return self.pose(), self.gantry.light
+
+    def move_to(self, pose: RigPose, *, wait: bool = True) -> RigPose | None:
+        """Move every axis to ``pose`` together; returns the measured pose when ``wait``.
+
+        Raises
+        ------
+        SafetyError
+            The pose, or the straight path from the present pose to it, is outside the limits
+            or crosses a forbidden zone; nothing was sent.
+        """
+        check_pose(self.config, pose)
+        start = self.pose()
+        check_path(self.config, start, pose)
+        targets = dict(pose.items())
+        begin = dict(start.items())
+        seconds = 0.0
+        for device in self.devices:
+            wanted = {role: targets[role] for role in device.roles if role in targets}
+            device.move_to_deg(wanted)
+            seconds = max(seconds, device.seconds_to(begin, wanted))
+        if not wait:
+            return None
+        self.wait_until_arrived(2.0 * seconds + MOVE_MARGIN_S)
+        return self.pose()
+
+    def wait_until_arrived(self, timeout_s: float) -> None:
+        for device in self.devices:
+            device.wait_until_arrived(timeout_s)
+
+    def park(self) -> RigPose | None:
+        """Light off, then move to the config's park pose."""
+        self.gantry.light_off()
+        return self.move_to(self.config.park)
+
+    def light_on(self, intensity: float = 1.0) -> None:
+        self.gantry.light_on(intensity)
+
+    def light_off(self) -> None:
+        self.gantry.light_off()
+
+    def stop(self) -> None:
+        """Stop every axis now (never raises)."""
+        for device in self.devices:
+            with contextlib.suppress(RigError):
+                device.stop()
+
+    def capture(self, exposure_ms: float) -> Frame:
+        if self.camera is None:
+            raise InputError("this rig was built without a camera")
+        return self.camera.capture(exposure_ms)

@@ -1,0 +1,140 @@
+"""The simulated rig: the servo chain and the GRBL gantry emulated on pseudo-terminals.
+
+:class:`SimulatedRig` starts both emulators for a rig config (the servo ids and GRBL axes it
+names, the servos standing at the park pose), and gives the config with the emulators' serial
+devices filled in, so the real drivers (:class:`rig.hardware.Rig`) talk to them byte for byte.
+``rig sim start`` runs one until Ctrl-C; tests and ``rig capture --sim`` start one in process.
+:func:`simulated_camera` renders the synthetic scene at the rig's measured pose and light.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from types import TracebackType
+
+from rig.config import RigConfig, simulated_config
+from rig.hardware import Rig, servo_axis
+from rig.pose import RigPose
+from sim.dynamixel_emulator import FaultConfig, ServoChainEmulator, ServoSpec
+from sim.grbl_emulator import GrblEmulator, GrblFaults
+from sim.simulated_camera import SimulatedCamera
+
+__all__ = ["SimulatedRig", "simulated_camera"]
+
+#: GRBL settings of the emulated gantry: fast axes (degrees per minute, per second squared) so
+#: simulated sessions are quick; the driver's feed (config) is what limits a move.
+GANTRY_SETTINGS: dict[int, float] = {110: 36_000.0, 111: 36_000.0, 120: 3_600.0, 121: 3_600.0}
+
+
+def _servo_ticks(config: RigConfig, role: str, degrees: float) -> int:
+    axis = servo_axis(config.axes[role])
+    turns = axis.direction * axis.gear_ratio * (degrees - axis.offset_deg) / 360.0
+    return round(2048 + 4096 * turns)
+
+
+class SimulatedRig:
+    """Both emulators of a rig config, running until :meth:`close`.
+
+    Parameters
+    ----------
+    config : RigConfig, optional
+        The rig to emulate (its ports are replaced by the emulators'); default
+        :func:`rig.config.simulated_config`.
+    servo_faults, gantry_faults : fault injection of the emulators
+    """
+
+    def __init__(
+        self,
+        config: RigConfig | None = None,
+        *,
+        servo_faults: FaultConfig | None = None,
+        gantry_faults: GrblFaults | None = None,
+    ) -> None:
+        base = config or simulated_config("/dev/null", "/dev/null")
+        servo_roles = base.axes_of("dynamixel")
+        specs = [
+            ServoSpec(
+                id=int(axis.servo_id or 0),
+                position_ticks=_servo_ticks(base, role, base.park.get(role)),
+            )
+            for role, axis in servo_roles.items()
+        ]
+        settings = dict(GANTRY_SETTINGS)
+        settings[30] = base.light.max_s
+        # The gantry stands at the park pose too (as a real one left there after a session).
+        position = [0.0, 0.0, 0.0]
+        for role, axis in base.axes_of("grbl").items():
+            position["XYZ".index(str(axis.grbl_axis))] = axis.to_device(base.park.get(role))
+        self.servos = ServoChainEmulator(specs, faults=servo_faults) if specs else None
+        try:
+            self.gantry = GrblEmulator(
+                settings=settings,
+                faults=gantry_faults,
+                position=(position[0], position[1], position[2]),
+            ).start()
+        except BaseException:
+            if self.servos is not None:
+                self.servos.close()
+            raise
+        servos = base.servos
+        self.config = dataclasses.replace(
+            base,
+            servos=None
+            if servos is None or self.servos is None
+            else dataclasses.replace(servos, port=self.servos.port),
+            gantry=dataclasses.replace(base.gantry, port=self.gantry.port)
+            if base.gantry is not None
+            else None,
+        )
+
+    @property
+    def ports(self) -> dict[str, str]:
+        """The emulators' serial devices by name."""
+        ports = {"gantry": self.gantry.port}
+        if self.servos is not None:
+            ports["servos"] = self.servos.port
+        return ports
+
+    def rig(self, *, camera: bool = True) -> Rig:
+        """A :class:`Rig` on the emulators (not yet connected), with the simulated camera."""
+        rig = Rig(self.config)
+        if camera:
+            rig.camera = simulated_camera(rig)
+        return rig
+
+    def __enter__(self) -> SimulatedRig:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop both emulators and remove their ptys (idempotent)."""
+        try:
+            if self.servos is not None:
+                self.servos.close()
+        finally:
+            self.gantry.close()
+
+
+def simulated_camera(rig: Rig) -> SimulatedCamera:
+    """The config's simulated camera, seeing the scene at ``rig``'s measured pose and light."""
+    camera = rig.config.camera
+    if getattr(camera, "backend", None) != "simulated":
+        raise ValueError(f"the rig config's camera is {camera.backend!r}, not simulated")
+    root = None if rig.config.source is None else rig.config.source.parent
+
+    def state() -> tuple[RigPose, object]:
+        pose, light = rig.state()
+        # Servo positions are whole ticks: round to 1/100 degree so that a pose the plan asked
+        # for renders (and seeds its noise) identically on every run.
+        rounded = RigPose.from_roles({r: round(v, 2) for r, v in pose.items() if not math.isnan(v)})
+        return rounded, light
+
+    return SimulatedCamera.from_config(camera, state, root=root)  # type: ignore[arg-type]
