@@ -82,7 +82,7 @@ def _run_doctor(args: argparse.Namespace) -> int:
         camera = simulated_camera(rig)
     elif config.camera.backend != "replay":  # a replay camera serves a dataset: nothing to check
         try:
-            camera = open_camera(config.camera)
+            camera = open_camera(config)
         except RigError as error:
             problems.append(
                 DoctorCheck(f"camera ({config.camera.backend})", "open", False, str(error))

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 
 from rig.devices import Camera
 from rig.errors import RigError
-from rig.hardware import Rig
+from rig.hardware import LightGantry, Rig, ServoArm
 from rig.pose import RigPose
 from rig.safety import pose_violation
 
@@ -62,7 +62,7 @@ def run_doctor(rig: Rig, *, exposure_ms: float = 10.0) -> list[DoctorCheck]:
 
     servos = rig.config.servos
     gantry = rig.config.gantry
-    connected = []
+    connected: list[ServoArm | LightGantry] = []
     if rig.arm is not None and servos is not None:
         ok = attempt(f"servos {servos.port}", "connect", _connect(rig.arm.connect, rig.arm.roles))
         if ok:
@@ -83,11 +83,11 @@ def run_doctor(rig: Rig, *, exposure_ms: float = 10.0) -> list[DoctorCheck]:
                 f"camera ({rig.config.camera.backend})", "capture", _frame(rig.camera, exposure_ms)
             )
     finally:
-        for device in connected:
+        for part in connected:
             try:
-                device.close()
+                part.close()
             except RigError as error:
-                checks.append(DoctorCheck(type(device).__name__, "close", False, str(error)))
+                checks.append(DoctorCheck(type(part).__name__, "close", False, str(error)))
         if rig.camera is not None:
             try:
                 rig.camera.close()
