@@ -511,3 +511,27 @@ def test_hard_limit_alarm_mid_move() -> None:
             gantry.move_to_deg(0.0, 10.0)
         gantry.unlock()
         gantry.move_to_deg(0.0, 10.0)
+
+
+def test_full_cycle_connect_home_move_light_alarm_unlock() -> None:
+    settings = {22: 1, 24: 6000.0, 25: 30000.0, 27: 2.0}
+    wide = GantryAxes(GantryAxisConfig("X", -180.0, 180.0), GantryAxisConfig("Y", -90.0, 90.0))
+    faults = GrblFaults(hard_limit_after_moves=2)  # the second motion block
+    with rig(settings=settings, faults=faults, axes=wide) as (emulator, gantry):
+        assert gantry.status().state == "Alarm"  # homing enabled: locked until homed
+        assert gantry.home().state == "Idle"
+        gantry.move_to_deg(-30.0, -20.0)
+        gantry.light_on(0.25)
+        assert emulator.light.on and emulator.light.intensity == pytest.approx(0.25)
+        with pytest.raises(GrblAlarmError, match="ALARM:1"):
+            gantry.move_to_deg(-60.0, -40.0)
+        assert not emulator.light.on  # GRBL switched the light off with the alarm
+        with pytest.raises(GrblCommandError) as refused:
+            gantry.move_to_deg(-40.0, -30.0)
+        assert refused.value.code == 9
+        gantry.unlock()
+        gantry.move_to_deg(-40.0, -30.0)
+        assert gantry.position_deg() == pytest.approx((-40.0, -30.0))
+        gantry.light_on(1.0)
+        gantry.light_off()
+        assert not emulator.light.on
