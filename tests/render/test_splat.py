@@ -25,7 +25,7 @@ def test_plan_reproduces_the_simulator_splats(scene: str) -> None:
 
 def test_spacing_estimate_matches_the_sampler() -> None:
     samples = build_scene("diffuse-sphere", 50_000)
-    assert abs(point_spacing(samples.points) / samples.spacing - 1) < 0.25
+    assert abs(point_spacing(samples.points) / samples.spacing - 1) < 0.03
 
 
 def test_weights_sum_to_one_per_covered_pixel() -> None:
@@ -48,3 +48,9 @@ def test_bad_radiance_shape_is_refused() -> None:
     )
     with pytest.raises(InputError, match=r"\(1000, 3\)"):
         splat(plan, np.ones((999, 3)))
+
+
+def test_spacing_of_a_square_lattice_is_its_pitch() -> None:
+    u, v = np.meshgrid(np.arange(300) * 0.01, np.arange(300) * 0.01)
+    lattice = np.stack([u.ravel(), v.ravel(), np.zeros(u.size)], axis=1)
+    assert point_spacing(lattice) == pytest.approx(0.01, rel=0.03)
