@@ -15,7 +15,10 @@ ALLOWED = {
     "render": {"render", "processing", "rig"},
     "sim": {"sim", "rig"},
 }
-APPLICATION_LAYER = {"rig/cli.py", "rig/demo.py"}
+#: The command line and the demo may import every package (``rig/cli.py``, ``rig/cli_*.py``).
+APPLICATION_LAYER = {"rig/cli.py", "rig/demo.py"} | {
+    p.relative_to(ROOT).as_posix() for p in (ROOT / "rig").glob("cli_*.py")
+}
 
 
 def _project_imports(path: Path) -> set[str]:
