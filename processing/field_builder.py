@@ -38,6 +38,7 @@ from tqdm import tqdm
 from capture.dataset import Dataset, ImageRecord
 from processing.decode import DecodedImage, Transfer, decode_image
 from processing.hdr import Exposure, merge_exposures
+from processing.interpolation import interpolation_weights
 from rig.camera_model import PinholeCamera
 from rig.directions import angles_deg_from_direction, direction_from_angles_deg, normalize
 from rig.errors import DatasetError, InputError
@@ -177,7 +178,8 @@ class FieldBuildReport:
     saturated_fraction : float, visible samples (x channels) saturated in every exposure (their
         value is a lower bound)
     camera_spread_deg, light_spread_deg : float, see :class:`FieldLayout`
-    missing : list of (camera_index, light_index) left at zero (``allow_missing``)
+    missing : list of (camera_index, light_index) without an image (plan-skipped pairs, or
+        with ``allow_missing`` lost ones), interpolated from the camera's other lights
     seconds : float, wall time
     """
 
@@ -438,7 +440,8 @@ def build_field(
         ``sensitivity / (1000 * full_well)``; for a real camera, from a white reference (or 1,
         leaving the field in camera units).
     allow_missing : bool
-        Leave the slabs of images the dataset lacks at zero instead of refusing.
+        Interpolate the slabs of planned images the dataset lacks instead of refusing (slabs
+        of pairs the plan skipped are always interpolated from the camera's other lights).
     dtype : {"float32", "float16"}, the store's radiance type
     demosaic, transfer : passed to :func:`processing.decode.decode_image`
     light_model : dict, optional, the store's light model (default directional, unit intensity)
@@ -462,11 +465,22 @@ def build_field(
     layout = field_layout(
         data, camera=camera, calibration=calibration, light_intensity=light_intensity
     )
-    if layout.missing and not allow_missing:
-        listed = ", ".join(f"camera {c} light {t}" for c, t in layout.missing[:5])
+    # Pairs the plan skipped (the light where the camera is, a forbidden zone) were never to be
+    # taken: their slabs are interpolated from the camera's other lights. Planned images that
+    # are missing are an incomplete capture.
+    planned = (
+        None
+        if data.planned is None
+        else {(k.camera_index, k.light_index) for k in data.planned if k.kind == "light"}
+    )
+    unplanned = [pair for pair in layout.missing if planned is not None and pair not in planned]
+    lost = [pair for pair in layout.missing if pair not in unplanned]
+    if lost and not allow_missing:
+        listed = ", ".join(f"camera {c} light {t}" for c, t in lost[:5])
         raise DatasetError(
-            f"{data.path}: {len(layout.missing)} images missing ({listed}"
-            f"{', ...' if len(layout.missing) > 5 else ''}); re-take them or allow missing"
+            f"{data.path}: {len(lost)} planned images missing ({listed}"
+            f"{', ...' if len(lost) > 5 else ''}); re-take them (rig capture --resume) or "
+            "allow missing"
         )
     radius = float(np.linalg.norm(cloud.points, axis=1).max())
     for pinhole in layout.cameras:
@@ -510,6 +524,7 @@ def build_field(
             index = np.flatnonzero(visible)
             counts["visible"] += len(index)
             darks: dict[float, DecodedImage] = {}
+            taken: dict[int, NDArray[np.float32]] = {}
             for t in range(t_count):
                 bracket = layout.brackets.get((s, t))
                 if bracket is None:
@@ -533,7 +548,10 @@ def build_field(
                 clipped = sample_view(merged.saturated.astype(np.float32), splats, index) > 0
                 counts["saturated"] += int(clipped.sum())
                 store.write_slab(s, t, slab)
+                taken[t] = slab
                 bar.update()
+            for t in set(range(t_count)) - set(taken):
+                store.write_slab(s, t, _interpolated_slab(layout.light_directions, taken, t))
     finally:
         bar.close()
     visible_total = max(counts["visible"], 1)
@@ -551,6 +569,23 @@ def build_field(
         missing=list(layout.missing),
         seconds=time.perf_counter() - started,
     )
+
+
+def _interpolated_slab(
+    directions: NDArray[np.floating], taken: Mapping[int, NDArray[np.float32]], missing: int
+) -> NDArray[np.float32]:
+    """The slab of light ``missing`` interpolated (barycentric) from the camera's taken ones."""
+    if not taken:
+        raise DatasetError(f"a camera pose has no light images to interpolate light {missing}")
+    have = sorted(taken)
+    measured = np.asarray(directions, dtype=np.float64)[have]
+    weights = interpolation_weights(
+        measured, np.asarray(directions, dtype=np.float64)[missing : missing + 1], "barycentric"
+    )
+    slab = np.zeros_like(taken[have[0]])
+    for j, w in zip(weights.indices[0], weights.weights[0], strict=True):
+        slab += np.float32(w) * taken[have[int(j)]]
+    return slab
 
 
 def read_point_cloud(path: str | os.PathLike[str]) -> PointCloud:

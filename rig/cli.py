@@ -14,6 +14,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from rig.cli_capture import add_capture
+from rig.cli_plan import add_plan
+from rig.cli_process import add_process
 from rig.cli_rig import add_doctor, add_sim_start
 from rig.errors import RigError
 
@@ -544,6 +547,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_demo(commands)
     _add_relight(commands)
     add_doctor(commands)
+    add_plan(commands)
+    add_capture(commands)
+    add_process(commands)
     _add_sim(commands)
     return parser
 

@@ -260,7 +260,8 @@ def camera_to_dict(camera: CameraConfig) -> dict[str, Any]:
     for f in fields(camera):
         value = getattr(camera, f.name)
         if isinstance(value, CameraFaultConfig):
-            value = {g.name: getattr(value, g.name) for g in fields(value)}
+            faults = {g.name: getattr(value, g.name) for g in fields(value)}
+            value = {k: v for k, v in faults.items() if v is not None}  # TOML has no null
         if value is not None:
             document[f.name] = value
     return document

@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Mapping
+from dataclasses import replace
 from types import TracebackType
 
 from rig.config import XM430_W350, AxisConfig, RigConfig
@@ -24,7 +25,7 @@ from rig.dynamixel import DynamixelChain, ServoAxisConfig
 from rig.errors import DeviceError, InputError, RigError
 from rig.grbl import GantryAxes, GantryAxisConfig, GrblGantry
 from rig.pose import RigPose
-from rig.safety import check_path, check_pose
+from rig.safety import check_path, check_pose, path_violation, pose_violation
 
 __all__ = ["LightGantry", "Rig", "ServoArm", "gantry_axis", "servo_axis"]
 
@@ -309,9 +310,36 @@ class Rig:
             device.wait_until_arrived(timeout_s)
 
     def park(self) -> RigPose | None:
-        """Light off, then move to the config's park pose."""
+        """Light off, then move to the config's park pose by the first safe route.
+
+        Routes tried: straight; the light first, then the camera; the camera first, then the
+        light (a straight move may sweep the light past the camera where moving one arm at a
+        time does not).
+        """
         self.gantry.light_off()
-        return self.move_to(self.config.park)
+        here, park = self.pose(), self.config.park
+        light_first = replace(
+            here,
+            light_azimuth_deg=park.light_azimuth_deg,
+            light_inclination_deg=park.light_inclination_deg,
+        )
+        camera_first = replace(
+            here,
+            camera_azimuth_deg=park.camera_azimuth_deg,
+            camera_inclination_deg=park.camera_inclination_deg,
+        )
+        routes = ((park,), (light_first, park), (camera_first, park))
+        for route in routes:
+            legs = zip((here, *route[:-1]), route, strict=True)
+            if all(
+                pose_violation(self.config, b) is None and path_violation(self.config, a, b) is None
+                for a, b in legs
+            ):
+                reached = None
+                for pose in route:
+                    reached = self.move_to(pose)
+                return reached
+        return self.move_to(park)  # raises SafetyError naming the unsafe stretch
 
     def light_on(self, intensity: float = 1.0) -> None:
         self.gantry.light_on(intensity)

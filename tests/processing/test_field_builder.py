@@ -275,11 +275,18 @@ def test_layout_lists_missing_images_and_build_refuses_them(tmp_path: Path) -> N
     manifest.write_text(json.dumps(document))
     layout = field_layout(Dataset.open(capture.path), camera=capture.rig_camera)
     assert layout.missing == [(1, 0)]
-    with pytest.raises(DatasetError, match=r"1 images missing .camera 1 light 0"):
+    with pytest.raises(DatasetError, match=r"1 planned images missing .camera 1 light 0"):
         _build(capture, tmp_path / "built.zarr")
     report = _build(capture, tmp_path / "built.zarr", allow_missing=True)
     assert report.missing == [(1, 0)] and report.without_dark == 3
-    assert not ReflectanceField.open(tmp_path / "built.zarr").load()[1, 0].any()
+    built = ReflectanceField.open(tmp_path / "built.zarr").load()
+    # Interpolated from the camera's other light (the only one: its slab).
+    np.testing.assert_array_equal(built[1, 0], built[1, 1])
+    # A pair the plan skipped (the light where the camera stands) is filled without asking.
+    keys = ("kind", "camera_index", "light_index", "exposure_index")
+    document["planned_images"] = [{k: r[k] for k in keys} for r in document["images"]]
+    manifest.write_text(json.dumps(document))
+    assert _build(capture, tmp_path / "again.zarr").missing == [(1, 0)]
 
 
 def test_a_bad_image_is_named(tmp_path: Path) -> None:

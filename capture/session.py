@@ -1,0 +1,310 @@
+"""The capture executor: runs a sweep plan on a rig, one checkpoint per image, resumable.
+
+A :class:`CaptureSession` is an explicit state machine (``SessionState``; allowed transitions
+in ``TRANSITIONS``) in the manner of bluesky's run engine. Each image is a checkpoint: the file
+is written atomically into the dataset, then one event is appended (and fsynced) to the journal.
+Whatever happened before, a new session over the same dataset takes exactly the planned images
+the journal does not record as done, plus any whose file is missing or corrupt (checksums are
+re-verified), so a run stopped by Ctrl-C, a device error, SIGKILL or a power loss resumes where
+it stopped, nothing lost and nothing duplicated.
+
+Pause (:meth:`CaptureSession.request_pause`, what Ctrl-C asks for) takes effect between
+images: the current image is finished, the rig parks, the run stops with status ``paused``.
+Device errors are retried within bounds (a move after ``stop``, a capture after a camera
+timeout); then the rig parks and the run stops ``failed`` with the reason. On every exit path
+the light is switched off and motion stopped before the stop document is written.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import enum
+import threading
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from tqdm import tqdm
+
+from capture.dataset import Dataset
+from capture.frame_files import frame_file
+from capture.journal import (
+    ExitStatus,
+    ImageKey,
+    completed_images,
+    config_digest,
+    read_journal,
+    runs,
+)
+from capture.plan import CaptureEvent, SweepPlan
+from rig.config import RigConfig
+from rig.devices import Frame
+from rig.dynamixel import ServoHardwareError
+from rig.errors import DeviceError, RigError, SafetyError
+from rig.grbl import GrblAlarmError
+from rig.pose import RigPose
+
+__all__ = [
+    "TRANSITIONS",
+    "CaptureRig",
+    "CaptureSession",
+    "SessionResult",
+    "SessionState",
+]
+
+
+class SessionState(enum.StrEnum):
+    """Where a session is."""
+
+    IDLE = "idle"
+    RUNNING = "running"
+    PAUSING = "pausing"  # a pause was asked for; the current image is being finished
+    PARKING = "parking"
+    STOPPED = "stopped"
+
+
+#: Allowed transitions; anything else is a bug and raises.
+TRANSITIONS: Mapping[SessionState, frozenset[SessionState]] = {
+    SessionState.IDLE: frozenset({SessionState.RUNNING}),
+    SessionState.RUNNING: frozenset({SessionState.PAUSING, SessionState.PARKING}),
+    SessionState.PAUSING: frozenset({SessionState.PARKING}),
+    SessionState.PARKING: frozenset({SessionState.STOPPED}),
+    SessionState.STOPPED: frozenset(),
+}
+
+
+class CaptureRig(Protocol):
+    """What the executor needs of a rig (:class:`rig.hardware.Rig` is one)."""
+
+    config: RigConfig
+
+    def move_to(self, pose: RigPose, *, wait: bool = True) -> RigPose | None: ...
+
+    def light_on(self, intensity: float = 1.0) -> None: ...
+
+    def light_off(self) -> None: ...
+
+    def capture(self, exposure_ms: float) -> Frame: ...
+
+    def park(self) -> RigPose | None: ...
+
+    def stop(self) -> None: ...
+
+
+@dataclass(frozen=True)
+class SessionResult:
+    """How a run ended.
+
+    Attributes
+    ----------
+    exit_status : "success", "paused", "aborted" or "failed"
+    reason : str, why (empty on success)
+    taken : int, images taken by this run
+    already_done : int, planned images an earlier run had taken (verified)
+    retaken : int, images of earlier runs taken again (missing or corrupt files)
+    seconds : dict, wall time by phase: move, light, capture, store, total
+    """
+
+    exit_status: ExitStatus
+    reason: str
+    taken: int
+    already_done: int
+    retaken: int
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+class CaptureSession:
+    """Run ``plan`` on ``rig`` into ``dataset``.
+
+    Parameters
+    ----------
+    rig : CaptureRig, connected
+    dataset : Dataset, created with this plan (or opened to resume)
+    plan : SweepPlan
+    move_retries, capture_retries : attempts after a failed move or capture
+    progress : bool, show a progress bar with ETA
+    """
+
+    def __init__(
+        self,
+        rig: CaptureRig,
+        dataset: Dataset,
+        plan: SweepPlan,
+        *,
+        move_retries: int = 2,
+        capture_retries: int = 2,
+        progress: bool = True,
+    ) -> None:
+        self.rig = rig
+        self.dataset = dataset
+        self.plan = plan
+        self.move_retries = move_retries
+        self.capture_retries = capture_retries
+        self.progress = progress
+        self.state = SessionState.IDLE
+        self._lock = threading.Lock()
+        self._pause = threading.Event()
+        self._pose: RigPose | None = None  # commanded pose the rig stands at
+        self._measured: RigPose | None = None
+        self._light = False
+        self._seconds = dict.fromkeys(("move", "light", "capture", "store"), 0.0)
+
+    def _to(self, state: SessionState) -> None:
+        with self._lock:
+            if state not in TRANSITIONS[self.state]:
+                raise RuntimeError(f"capture session cannot go from {self.state} to {state}")
+            self.state = state
+
+    def request_pause(self) -> None:
+        """Finish the current image, park, stop with status ``paused`` (thread- and signal-safe)."""
+        self._pause.set()
+
+    # -- the run ----------------------------------------------------------------------------
+
+    def _pending(self) -> tuple[list[CaptureEvent], int, int, str | None]:
+        """Events still to take, images done before, images to re-take, the last run's uid."""
+        events = list(self.plan.events(self.rig.config))
+        done: set[ImageKey] = set()
+        previous = None
+        if self.dataset.journal_path.exists():
+            documents = read_journal(self.dataset.journal_path).documents
+            done = completed_images(documents)
+            history = runs(documents)
+            previous = history[-1].uid if history else None
+        retake = self.dataset.verify().retake & done
+        done -= retake
+        pending = [e for e in events if e.key not in done]
+        return pending, len(events) - len(pending), len(retake), previous
+
+    def run(self) -> SessionResult:
+        """Take every pending image; returns how the run ended (never raises a RigError)."""
+        self._to(SessionState.RUNNING)
+        start = time.perf_counter()
+        pending, already, retaken, previous = self._pending()
+        config = self.rig.config
+        journal = self.dataset.open_journal()
+        journal.start(
+            plan=self.plan.to_dict(),
+            rig_config_digest=config_digest(config.to_dict()),
+            resumed_from=previous,
+        )
+        status: ExitStatus = "success"
+        reason = ""
+        taken = 0
+        bar = tqdm(
+            total=already + len(pending),
+            initial=already,
+            desc="capture",
+            unit="image",
+            disable=not self.progress,
+        )
+        try:
+            for event in pending:
+                if self._pause.is_set():
+                    self._to(SessionState.PAUSING)
+                    status, reason = "paused", "pause requested (Ctrl-C); resume to continue"
+                    break
+                self._take(event, journal)
+                taken += 1
+                bar.update(1)
+        except KeyboardInterrupt:
+            status, reason = "aborted", "interrupted during an image (a second Ctrl-C)"
+        except RigError as error:
+            status, reason = "failed", str(error)
+        finally:
+            bar.close()
+            reason = self._park(reason)
+            self._seconds["total"] = time.perf_counter() - start
+            journal.stop(
+                status,
+                reason=reason,
+                counts={"taken": taken, "already_done": already, "retaken": retaken},
+            )
+            journal.close()
+            self.dataset.save()
+            self._to(SessionState.STOPPED)
+        return SessionResult(status, reason, taken, already, retaken, dict(self._seconds))
+
+    def _park(self, reason: str) -> str:
+        """Light off, motion stopped, park; failures are added to the reason, never raised."""
+        self._to(SessionState.PARKING)
+        problems = []
+        for step in (self.rig.light_off, self.rig.stop, self.rig.park):
+            try:
+                step()
+            except RigError as error:
+                problems.append(f"{step.__name__}: {error}")
+        self._light = False
+        if problems:
+            reason = "; ".join(filter(None, [reason, "parking failed: " + "; ".join(problems)]))
+        return reason
+
+    # -- one image --------------------------------------------------------------------------
+
+    def _take(self, event: CaptureEvent, journal: Any) -> None:
+        self._move(event.pose)
+        started = time.perf_counter()
+        if event.light_on and not self._light:
+            self.rig.light_on(1.0)
+            self._light = True
+        elif not event.light_on and self._light:
+            self.rig.light_off()
+            self._light = False
+        self._seconds["light"] += time.perf_counter() - started
+        time_start = time.time()
+        frame = self._capture(event.exposure_ms)
+        time_end = time.time()
+        started = time.perf_counter()
+        suffix, data = frame_file(frame)
+        assert self._measured is not None
+        record = self.dataset.write_image(
+            event.name + suffix,
+            data,
+            key=event.key,
+            exposure_ms=event.exposure_ms,
+            commanded_pose=event.pose.to_dict(),
+            measured_pose=self._measured.to_dict(),
+        )
+        journal.event(record, time_start=time_start, time_end=time_end)
+        self._seconds["store"] += time.perf_counter() - started
+
+    def _move(self, pose: RigPose) -> None:
+        if pose == self._pose:
+            return
+        started = time.perf_counter()
+        first: DeviceError | None = None
+        for attempt in range(self.move_retries + 1):
+            try:
+                measured = self.rig.move_to(pose)
+                break
+            except (SafetyError, GrblAlarmError, ServoHardwareError) as error:
+                # Unsafe, or a fault a person must look at (a GRBL alarm locks the gantry until
+                # it is homed or unlocked; an overload drops a servo's torque until a reboot).
+                raise error from first
+            except DeviceError as error:
+                # The device refused or lost the move: stop everything, then try again.
+                first = first or error
+                self._pose = None
+                with contextlib.suppress(RigError):
+                    self.rig.stop()
+                if attempt == self.move_retries:
+                    if error is not first:
+                        error.add_note(f"first attempt: {first}")
+                    raise
+        assert measured is not None
+        self._pose, self._measured = pose, measured
+        self._seconds["move"] += time.perf_counter() - started
+
+    def _capture(self, exposure_ms: float) -> Frame:
+        started = time.perf_counter()
+        try:
+            for attempt in range(self.capture_retries + 1):
+                try:
+                    return self.rig.capture(exposure_ms)
+                except DeviceError:
+                    if attempt == self.capture_retries:
+                        raise
+            raise AssertionError("unreachable")
+        finally:
+            self._seconds["capture"] += time.perf_counter() - started

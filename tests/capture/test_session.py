@@ -1,0 +1,228 @@
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from capture.dataset import Dataset
+from capture.journal import read_journal
+from capture.plan import SweepPlan, grid_plan
+from capture.session import CaptureSession, SessionResult, SessionState
+from rig.cli import main
+from rig.cli_capture import simulated_capture_config
+from rig.config import RigConfig
+from rig.config_cameras import CameraFaultConfig
+from rig.errors import DeviceError
+from rig.hardware import Rig
+from sim.dynamixel_emulator import FaultConfig
+from sim.grbl_emulator import GrblFaults
+from sim.simulated_rig import SimulatedRig
+
+SIM = ["--sim", "--cameras", "2", "--lights", "5", "--size", "32", "--points", "1500",
+       "--speed", "20", "--quiet"]  # fmt: skip
+
+
+def _config(**camera: Any) -> RigConfig:
+    config = simulated_capture_config("glossy-sphere", size=32, points=1500, speed=20.0)
+    if camera:
+        config = dataclasses.replace(config, camera=dataclasses.replace(config.camera, **camera))
+    return config
+
+
+def _plan() -> SweepPlan:
+    """The plan `rig capture --sim` runs with SIM: 2 dark frames, 10 light images."""
+    return grid_plan(2, 5, exposures_ms=(40.0,), layout="fibonacci")
+
+
+@contextmanager
+def _session(
+    tmp: Path, config: RigConfig, plan: SweepPlan, name: str = "d", **faults: Any
+) -> Iterator[tuple[CaptureSession, SimulatedRig, Rig]]:
+    path = tmp / name
+    if path.exists():
+        dataset = Dataset.open(path)
+    else:
+        dataset = Dataset.create(
+            path,
+            rig_config=config.to_dict(),
+            plan=plan.to_dict(),
+            planned=plan.planned_keys(config),
+        )
+    with SimulatedRig(config, **faults) as simulated, simulated.rig() as rig:
+        yield CaptureSession(rig, dataset, plan, progress=False), simulated, rig
+
+
+def _digests(path: Path) -> dict[str, str]:
+    return {
+        f.name: hashlib.sha256(f.read_bytes()).hexdigest()
+        for f in sorted((path / "images").iterdir())
+    }
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    """The images of an uninterrupted run."""
+    tmp = tmp_path_factory.mktemp("reference")
+    with _session(tmp, _config(), _plan()) as (session, simulated, _):
+        result = session.run()
+        assert not simulated.gantry.light.on
+    assert result.exit_status == "success" and result.taken == len(_plan().planned_keys(_config()))
+    return _digests(tmp / "d")
+
+
+def test_a_clean_run_leaves_a_complete_verified_dataset(tmp_path: Path) -> None:
+    with _session(tmp_path, _config(), _plan()) as (session, simulated, _):
+        result = session.run()
+        assert session.state == SessionState.STOPPED
+        assert not simulated.gantry.light.on
+    report = Dataset.open(tmp_path / "d").verify()
+    assert report.ok and report.complete
+    documents = read_journal(tmp_path / "d" / "journal.jsonl").documents
+    kinds = [d["type"] for d in documents]
+    assert kinds == ["start"] + ["event"] * result.taken + ["stop"]
+    assert documents[-1]["exit_status"] == "success"
+    assert set(result.seconds) == {"move", "light", "capture", "store", "total"}
+
+
+def test_two_runs_of_a_plan_give_identical_images(
+    tmp_path: Path, reference: dict[str, str]
+) -> None:
+    with _session(tmp_path, _config(), _plan()) as (session, _, _):
+        session.run()
+    assert _digests(tmp_path / "d") == reference
+
+
+def test_pause_parks_and_resume_completes_the_same_dataset(
+    tmp_path: Path, reference: dict[str, str]
+) -> None:
+    with _session(tmp_path, _config(), _plan()) as (session, simulated, rig):
+        capture = rig.capture
+
+        def capture_then_pause(exposure_ms: float) -> Any:
+            if len(list((tmp_path / "d" / "images").iterdir())) == 3:
+                session.request_pause()  # Ctrl-C during the fourth image
+            return capture(exposure_ms)
+
+        rig.capture = capture_then_pause  # type: ignore[method-assign]
+        paused = session.run()
+        assert paused.exit_status == "paused" and paused.taken == 4
+        park = rig.config.park
+        assert simulated.gantry.position_deg()[0] == pytest.approx(park.light_azimuth_deg)
+        assert not simulated.gantry.light.on
+    with _session(tmp_path, _config(), _plan()) as (session, _, _):
+        resumed = session.run()
+    assert resumed.exit_status == "success" and resumed.already_done == 4
+    assert _digests(tmp_path / "d") == reference
+    statuses = [
+        d.get("exit_status") for d in read_journal(tmp_path / "d" / "journal.jsonl").documents
+    ]
+    assert [s for s in statuses if s] == ["paused", "success"]
+
+
+FAULT_CASES = {
+    "servo stops answering: failed, named": (
+        {"servo_faults": FaultConfig(silent_ids=frozenset({2}), silent_after=30)},
+        "failed",
+        "servo 2",
+    ),
+    "gantry alarm mid-move: failed, named": (
+        {"gantry_faults": GrblFaults(hard_limit_after_moves=3)},
+        "failed",
+        "ALARM:1",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", FAULT_CASES)
+def test_device_faults_are_retried_or_stop_cleanly(tmp_path: Path, case: str) -> None:
+    options, status, words = FAULT_CASES[case]
+    config = _config()
+    try:
+        with _session(tmp_path, config, _plan(), **options) as (session, simulated, _):
+            result: SessionResult = session.run()
+            assert not simulated.gantry.light.on  # off on every exit path
+    except DeviceError as error:  # closing a rig with a silent servo says so
+        assert "servo 2" in str(error) and status == "failed"
+        result = _last_result(tmp_path / "d")
+    assert result.exit_status == status and words in result.reason
+    stop = read_journal(tmp_path / "d" / "journal.jsonl").documents[-1]
+    assert stop["type"] == "stop" and stop["exit_status"] == status and words in stop["reason"]
+
+
+def _last_result(path: Path) -> SessionResult:
+    stop = read_journal(path / "journal.jsonl").documents[-1]
+    return SessionResult(stop["exit_status"], stop["reason"], 0, 0, 0)
+
+
+def test_a_camera_timeout_is_retried(tmp_path: Path, reference: dict[str, str]) -> None:
+    with _session(tmp_path, _config(), _plan()) as (session, _, rig):
+        rig.camera.fail_next(2)  # type: ignore[union-attr]
+        result = session.run()
+    assert result.exit_status == "success"
+    assert _digests(tmp_path / "d") == reference
+
+
+def test_a_camera_that_never_answers_fails_the_run(tmp_path: Path) -> None:
+    config = _config(faults=CameraFaultConfig(timeout_after=1, stall_s=0.0))
+    with _session(tmp_path, config, _plan()) as (session, _, _):
+        result = session.run()
+    assert result.exit_status == "failed" and "no frame" in result.reason
+    assert result.taken == 1
+
+
+def test_a_corrupt_image_is_named_and_retaken(
+    tmp_path: Path, reference: dict[str, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    with _session(tmp_path, _config(), _plan()) as (session, _, _):
+        session.run()
+    victim = sorted((tmp_path / "d" / "images").iterdir())[2]
+    victim.write_bytes(victim.read_bytes()[:-10] + b"0123456789")
+    assert main(["verify", str(tmp_path / "d")]) == 1
+    assert victim.name in capsys.readouterr().out
+    with _session(tmp_path, _config(), _plan()) as (session, _, _):
+        result = session.run()
+    assert result.retaken == 1 and result.taken == 1
+    assert _digests(tmp_path / "d") == reference
+    assert main(["verify", str(tmp_path / "d")]) == 0
+
+
+def _kill_at(tmp: Path, events: int) -> Path:
+    """Run `rig capture --sim` in a child and SIGKILL it once ``events`` images are journaled."""
+    path = tmp / f"killed-{events}"
+    child = subprocess.Popen(
+        [sys.executable, "-m", "rig.cli", "capture", *SIM, "-o", str(path)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    journal = path / "journal.jsonl"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and child.poll() is None:
+        if journal.exists() and journal.read_bytes().count(b'"type":"event"') >= events:
+            break
+        time.sleep(0.005)
+    os.kill(child.pid, signal.SIGKILL)
+    child.wait()
+    return path
+
+
+@pytest.mark.parametrize("events", [1, 4, 7])
+def test_sigkill_then_resume_equals_an_uninterrupted_run(
+    tmp_path: Path, reference: dict[str, str], events: int
+) -> None:
+    path = _kill_at(tmp_path, events)
+    assert main(["capture", "--resume", str(path), "--quiet"]) == 0
+    assert _digests(path) == reference
+    dataset = Dataset.open(path)
+    report = dataset.verify()
+    assert report.ok and report.complete and not report.unexpected
+    assert len(dataset.records) == len(reference)  # nothing duplicated
