@@ -162,7 +162,11 @@ def _run_process(args: argparse.Namespace) -> int:
     if report.without_dark:
         print(f"warning: {report.without_dark} exposures had no dark frame (not subtracted)")
     if report.missing:
-        print(f"warning: {len(report.missing)} images missing, left at zero")
+        print(
+            f"note: {len(report.missing)} (camera, light) pairs without an image (skipped by the "
+            "plan, e.g. the light where the camera stands) interpolated from the camera's "
+            "other lights"
+        )
     if max(report.camera_spread_deg, report.light_spread_deg) > 0.5:
         print(
             f"warning: measured poses of one index spread {report.camera_spread_deg:.2f} deg "

@@ -76,6 +76,9 @@ def run_demo(directory: str | Path, *, quick: bool = False) -> Path:
             f"[overlay](sampling/{name}/overlay.png), [lights](sampling/{name}/lights.png) |"
         )
     lines += ["", "Every run gathers the same total light: disassembling conserves energy.", ""]
+    from rig.demo_capture import capture_demo
+
+    lines += capture_demo(out, panorama, quick)
     lines += _relight_demo(out, panorama, quick)
     lines += _rti_demo(out)
     report = out / "report.md"

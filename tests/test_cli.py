@@ -79,6 +79,9 @@ def test_demo_writes_pictures_and_report(tmp_path: Path) -> None:
             assert (tmp_path / "relight" / scene / picture).stat().st_size > 0
     assert (tmp_path / "relight" / "rti" / "studio.png").stat().st_size > 0
     assert "## Relighting simulated fields" in report
+    assert "## Capture on the simulated rig" in report and "capture: success" in report
+    assert (tmp_path / "capture" / "contact-sheet.png").stat().st_size > 0
+    assert (tmp_path / "capture" / "dataset" / "manifest.json").exists()
 
 
 @pytest.fixture(scope="module")
