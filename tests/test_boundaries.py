@@ -15,9 +15,11 @@ ALLOWED = {
     "render": {"render", "processing", "rig"},
     "sim": {"sim", "rig"},
 }
-#: The command line and the demo may import every package (``rig/cli.py``, ``rig/cli_*.py``).
-APPLICATION_LAYER = {"rig/cli.py", "rig/demo.py"} | {
-    p.relative_to(ROOT).as_posix() for p in (ROOT / "rig").glob("cli_*.py")
+#: The command line and the demo may import every package (``rig/cli*.py``, ``rig/demo*.py``).
+APPLICATION_LAYER = {
+    p.relative_to(ROOT).as_posix()
+    for pattern in ("cli*.py", "demo*.py")
+    for p in (ROOT / "rig").glob(pattern)
 }
 
 
