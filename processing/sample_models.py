@@ -120,6 +120,7 @@ __all__ = [
     "fit_sample_models",
     "format_loo_table",
     "geometric_shadow_marks",
+    "ggx_lobe",
     "interpolation_loo",
     "leave_one_out_weights",
     "photometric_stereo",
@@ -552,10 +553,13 @@ def interpolation_loo(field: ReflectanceField, method: str, *, m: int = 3) -> Lo
 # Parametric fits: the numba kernel
 
 
-@numba.njit(cache=True)
-def _lobe(cos_i: float, cos_o: float, cos_h: float, alpha: float) -> float:
-    # D(h) G1(wi) G1(wo) / (4 cos_i cos_o): sim.materials.specular_lobe, restated (processing
-    # may not import sim; the tests hold the two equal).
+@numba.njit(cache=True, inline="always")
+def ggx_lobe(cos_i: float, cos_o: float, cos_h: float, alpha: float) -> float:
+    """D(h) G1(wi) G1(wo) / (4 cos_i cos_o) of GGX with separable Smith masking, 1/sr.
+
+    ``sim.materials.specular_lobe`` restated (processing may not import sim; the tests hold the
+    two equal); :mod:`render.model_relight` evaluates the fits with it.
+    """
     if cos_h <= 0.0:
         return 0.0
     a2 = alpha * alpha
@@ -642,7 +646,7 @@ def _objective(
         a1 = ci / math.pi
         a2 = 0.0
         if with_lobe:
-            a2 = _lobe(ci, cos_o[k], cos_h[k], alpha) * ci
+            a2 = ggx_lobe(ci, cos_o[k], cos_h[k], alpha) * ci
             d = cos_h[k] * cos_h[k] * (alpha * alpha - 1.0) + 1.0
             peak = max(peak, a4 / (d * d))  # D(h) / D(n)
         s11 += a1 * a1
@@ -734,7 +738,7 @@ def _light_sums(
         if ci <= 0.0:
             continue
         a1 = ci / math.pi
-        a2 = _lobe(ci, cos_o[k], cos_h[k], alpha) * ci if with_lobe else 0.0
+        a2 = ggx_lobe(ci, cos_o[k], cos_h[k], alpha) * ci if with_lobe else 0.0
         sums[t, 0] += a1 * a1
         sums[t, 1] += a1 * a2
         sums[t, 2] += a2 * a2

@@ -58,6 +58,7 @@ from processing.sample_models import (
     choose_model,
     evaluate_basis,
     fit_sample_models,
+    ggx_lobe,
     shadow_mark_errors,
     with_geometric_visibility,
 )
@@ -330,18 +331,6 @@ def relight_models(
     return out
 
 
-@numba.njit(cache=True, inline="always")
-def _lobe(cos_i: float, cos_o: float, cos_h: float, alpha: float) -> float:
-    # D G1 G1 / (4 cos_i cos_o) of GGX, as processing.sample_models fits it (tested equal).
-    if cos_h <= 0.0:
-        return 0.0
-    a2 = alpha * alpha
-    t = cos_h * cos_h * (a2 - 1.0) + 1.0
-    g1_i = 2.0 * cos_i / (cos_i + math.sqrt(a2 + (1.0 - a2) * cos_i * cos_i))
-    g1_o = 2.0 * cos_o / (cos_o + math.sqrt(a2 + (1.0 - a2) * cos_o * cos_o))
-    return a2 / (math.pi * t * t) * g1_i * g1_o / (4.0 * cos_i * cos_o)
-
-
 @numba.njit(cache=True, parallel=True)
 def _shade_kernel(
     samples: NDArray[np.int64],
@@ -401,7 +390,7 @@ def _shade_kernel(
                 cos_h = (nx * hx + ny * hy + nz * hz) / max(
                     math.sqrt(hx * hx + hy * hy + hz * hz), 1e-300
                 )
-                specular = _lobe(cos_i, cos_o, cos_h, a)
+                specular = ggx_lobe(cos_i, cos_o, cos_h, a)
                 r += (diffuse_r + f0[q, 0] * specular) * scale * rgb[d, 0]
                 g += (diffuse_g + f0[q, 1] * specular) * scale * rgb[d, 1]
                 b += (diffuse_b + f0[q, 2] * specular) * scale * rgb[d, 2]

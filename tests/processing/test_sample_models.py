@@ -113,11 +113,11 @@ def _peak_seen(field: ReflectanceField, alpha: float, fraction: float = 0.02) ->
 
 
 def test_the_lobe_is_the_simulators() -> None:
-    from processing.sample_models import _lobe
+    from processing.sample_models import ggx_lobe
 
     rng = np.random.default_rng(1)
     for cos_i, cos_o, cos_h, alpha in rng.uniform(0.05, 1.0, size=(50, 4)):
-        assert _lobe(cos_i, cos_o, cos_h, alpha) == pytest.approx(
+        assert ggx_lobe(cos_i, cos_o, cos_h, alpha) == pytest.approx(
             specular_lobe(cos_i, cos_o, cos_h, alpha), rel=1e-12
         )
 
