@@ -21,7 +21,7 @@ import contextlib
 import enum
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -51,7 +51,13 @@ __all__ = [
     "CaptureSession",
     "SessionResult",
     "SessionState",
+    "TargetPlacer",
 ]
+
+#: Puts a calibration target (a :class:`capture.plan.CalibrationCapture` name such as
+#: "charuco", "mirror-sphere", "white-target") at the object's place, or the object back (None);
+#: returns when it is there (a console prompt on a real rig, a scene switch on the simulated one).
+TargetPlacer = Callable[[str | None], None]
 
 
 class SessionState(enum.StrEnum):
@@ -124,6 +130,9 @@ class CaptureSession:
     plan : SweepPlan
     move_retries, capture_retries : attempts after a failed move or capture
     progress : bool, show a progress bar with ETA
+    targets : TargetPlacer, optional
+        Called before an image whose target (a calibration capture's name, None for the object)
+        differs from the one in place; a fresh run starts with the object in place.
     """
 
     def __init__(
@@ -135,6 +144,7 @@ class CaptureSession:
         move_retries: int = 2,
         capture_retries: int = 2,
         progress: bool = True,
+        targets: TargetPlacer | None = None,
     ) -> None:
         self.rig = rig
         self.dataset = dataset
@@ -142,6 +152,9 @@ class CaptureSession:
         self.move_retries = move_retries
         self.capture_retries = capture_retries
         self.progress = progress
+        self.targets = targets
+        self._target: str | None = None  # what stands at the object's place
+        self._target_known = True
         self.state = SessionState.IDLE
         self._lock = threading.Lock()
         self._pause = threading.Event()
@@ -182,6 +195,8 @@ class CaptureSession:
         self._to(SessionState.RUNNING)
         start = time.perf_counter()
         pending, already, retaken, previous = self._pending()
+        # A resumed run may have stopped with a calibration target in place.
+        self._target_known = already == 0 or not self.plan.calibration
         config = self.rig.config
         journal = self.dataset.open_journal()
         journal.start(
@@ -243,6 +258,7 @@ class CaptureSession:
     # -- one image --------------------------------------------------------------------------
 
     def _take(self, event: CaptureEvent, journal: Any) -> None:
+        self._place(event)
         self._move(event.pose)
         started = time.perf_counter()
         if event.light_on and not self._light:
@@ -268,6 +284,15 @@ class CaptureSession:
         )
         journal.event(record, time_start=time_start, time_end=time_end)
         self._seconds["store"] += time.perf_counter() - started
+
+    def _place(self, event: CaptureEvent) -> None:
+        """Have the event's target (a calibration capture's, or the object) put in place."""
+        needed = None
+        if event.key.kind == "calibration" and event.key.light_index is not None:
+            needed = self.plan.calibration[event.key.light_index].name
+        if self.targets is not None and (needed != self._target or not self._target_known):
+            self.targets(needed)
+        self._target, self._target_known = needed, True
 
     def _move(self, pose: RigPose) -> None:
         if pose == self._pose:

@@ -226,6 +226,10 @@ def _spread_deg(directions: Sequence[NDArray[np.float64]], centre: NDArray[np.fl
     return float(np.rad2deg(np.arccos(cosines.min())))
 
 
+#: Calibration keys whose empty value means "not calibrated".
+_EMPTY = ("cameras", "lights")
+
+
 def _calibration_entry(calibration: Mapping[str, Any], kind: str, index: int) -> Any:
     entries = calibration.get(kind)
     try:
@@ -234,15 +238,38 @@ def _calibration_entry(calibration: Mapping[str, Any], kind: str, index: int) ->
         raise DatasetError(f"calibration[{kind!r}] has no entry for index {index}") from None
 
 
-def _calibrated_camera(entry: Any, camera: RigCamera | None, index: int) -> PinholeCamera:
+def _calibrated_camera(
+    entry: Any, camera: RigCamera | None, index: int, intrinsics: Any = None
+) -> PinholeCamera:
+    """The pinhole camera of a calibration entry.
+
+    Entries of :meth:`processing.calibration.Calibration.to_dict` (``position``, ``axes`` and the
+    derived angles and distance) take the field of view and size from the calibration's
+    ``intrinsics`` (horizontal focal length), else from ``camera``; the pinhole looks at the
+    origin, so roll and an off-centre aim are not kept.
+    """
     try:
+        if "azimuth_deg" not in entry and "position" in entry:
+            position = np.asarray(entry["position"], dtype=np.float64).reshape(3)
+            azimuth, inclination = angles_deg_from_direction(position)
+            entry = {
+                **entry,
+                "azimuth_deg": float(azimuth),
+                "inclination_deg": float(inclination),
+                "distance": float(np.linalg.norm(position)),
+            }
+        fov = camera.fov_deg if camera else float("nan")
+        width, height = (camera.width, camera.height) if camera else (0, 0)
+        if isinstance(intrinsics, Mapping):
+            width, height = int(intrinsics["width"]), int(intrinsics["height"])
+            fov = float(np.rad2deg(2.0 * np.arctan(0.5 * width / float(intrinsics["fx"]))))
         return PinholeCamera(
             float(entry["azimuth_deg"]),
             float(entry["inclination_deg"]),
             float(entry.get("distance", camera.distance if camera else float("nan"))),
-            float(entry.get("fov_deg", camera.fov_deg if camera else float("nan"))),
-            int(entry.get("width", camera.width if camera else 0)),
-            int(entry.get("height", camera.height if camera else 0)),
+            float(entry.get("fov_deg", fov)),
+            int(entry.get("width", width)),
+            int(entry.get("height", height)),
         )
     except (KeyError, TypeError, ValueError, AttributeError) as error:
         raise DatasetError(f"calibration camera {index}: {error!r}") from None
@@ -265,8 +292,11 @@ def field_layout(
         has every camera.
     calibration : mapping, optional
         ``calibration["cameras"][i]``: {azimuth_deg, inclination_deg, distance, fov_deg[,
-        width, height]} for camera index i; ``calibration["lights"][t]``: {direction: [x, y,
-        z][, intensity: float or [r, g, b]]} for light index t. Either key may be absent.
+        width, height]} for camera index i, or the entries of
+        :meth:`processing.calibration.Calibration.to_dict` (``position``, ``axes``, with the
+        field of view from its ``intrinsics``); ``calibration["lights"][t]``: {direction: [x,
+        y, z][, intensity: float or [r, g, b] or null]} for light index t. Either key may be
+        absent or empty (not calibrated).
     light_intensity : float, the intensity of every light not calibrated
 
     Raises
@@ -274,7 +304,7 @@ def field_layout(
     DatasetError
         No light images, a pose without the needed angles, a calibration without an index.
     """
-    calibration = calibration or {}
+    calibration = {k: v for k, v in (calibration or {}).items() if k not in _EMPTY or v}
     light_records = sorted(
         (r for r in dataset.records if r.kind == "light"),
         key=lambda r: (r.camera_index, r.light_index, r.exposure_index),
@@ -305,9 +335,8 @@ def field_layout(
     for s, c in enumerate(camera_indices):
         records = [r for r in light_records if r.camera_index == c]
         if "cameras" in calibration:
-            cameras.append(
-                _calibrated_camera(_calibration_entry(calibration, "cameras", c), camera, c)
-            )
+            entry = _calibration_entry(calibration, "cameras", c)
+            cameras.append(_calibrated_camera(entry, camera, c, calibration.get("intrinsics")))
             continue
         if camera is None:
             raise InputError("a camera model (RigCamera) or calibrated cameras are needed")
@@ -331,7 +360,8 @@ def field_layout(
         )
         if not isinstance(entry, Mapping):
             raise DatasetError(f"calibration light {t_index} must be a mapping, got {entry!r}")
-        intensity = entry.get("intensity", light_intensity)
+        intensity = entry.get("intensity")
+        intensity = light_intensity if intensity is None else intensity
         intensities.append(np.broadcast_to(np.asarray(intensity, dtype=np.float64), (3,)))
         if "direction" in entry:
             directions.append(normalize(np.asarray(entry["direction"], dtype=np.float64)))
@@ -503,7 +533,7 @@ def build_field(
             "light_indices": list(layout.light_indices),
             "radiance_scale": radiance_scale,
             "light_intensities": layout.intensities.tolist(),
-            "calibrated": sorted(k for k in ("cameras", "lights") if k in (calibration or {})),
+            "calibrated": sorted(k for k in _EMPTY if (calibration or {}).get(k)),
             "point_spacing": cloud.spacing,
             **dict(provenance or {}),
         },

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from rig.cli_calibrate import add_calibrate
 from rig.cli_capture import add_capture
 from rig.cli_plan import add_plan
 from rig.cli_process import add_process
@@ -549,6 +550,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_doctor(commands)
     add_plan(commands)
     add_capture(commands)
+    add_calibrate(commands)
     add_process(commands)
     _add_sim(commands)
     return parser

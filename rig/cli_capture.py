@@ -10,7 +10,14 @@ from typing import Any
 
 from rig.errors import InputError
 
-__all__ = ["add_capture", "simulated_capture_config"]
+__all__ = ["add_capture", "console_placer", "simulated_calibration", "simulated_capture_config"]
+
+#: What a person is asked to put at the object's place, by calibration capture name.
+TARGET_WORDS = {
+    "charuco": "the ChArUco board (flat, printed side up)",
+    "mirror-sphere": "the mirror sphere",
+    "white-target": "the white target (flat, face up)",
+}
 
 #: Exit status of a paused or aborted capture (the shell's convention for Ctrl-C).
 INTERRUPTED = 130
@@ -40,6 +47,12 @@ def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--exposure-ms", type=float, default=40.0, help="--sim: exposure (default 40)")
     p.add_argument(
         "--speed", type=float, default=1.0, help="--sim: axis speed factor (default 1: real time)"
+    )
+    p.add_argument(
+        "--calibrate",
+        action="store_true",
+        help="--sim: take calibration captures first (ChArUco per camera, mirror sphere and "
+        "white target per light; docs/calibration.md)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_run_capture)
@@ -87,6 +100,54 @@ def simulated_capture_config(
     return dataclasses.replace(base, axes=axes, camera=camera)
 
 
+def simulated_calibration(plan: Any, config: Any, *, white_target: bool = True) -> Any:
+    """``plan`` with the calibration captures ``rig calibrate`` needs (docs/calibration.md).
+
+    A ChArUco capture per camera pose (light on: any light the camera's pose allows), then per
+    light pose a mirror-sphere capture and (``white_target``) a white-target capture, both from
+    the camera pose nearest the light that the rig allows (the mirror sphere's highlight is then
+    far from its limb). The two targets alternate at one pose, which saves a move per light on
+    the simulated rig (a real rig's plan groups captures by target: fewer swaps by hand). All
+    in the plan's exposure bracket; captures no camera pose allows are left out.
+    """
+    from capture.plan import CalibrationCapture
+    from rig.directions import direction_from_angles_deg
+
+    lights = range(len(plan.lights))
+    towards = [direction_from_angles_deg(*angles) for angles in plan.cameras]
+
+    def nearest(t: int) -> list[tuple[int, int]]:
+        light = direction_from_angles_deg(*plan.lights[t])
+        order = sorted(range(len(towards)), key=lambda c: (-float(towards[c] @ light), c))
+        return [(c, t) for c in order]
+
+    # (name, candidate (camera, light) pairs in order of preference)
+    wanted: list[tuple[str, list[tuple[int, int]]]] = [
+        ("charuco", [(c, t) for t in lights]) for c in range(len(plan.cameras))
+    ]
+    names = ("mirror-sphere", "white-target") if white_target else ("mirror-sphere",)
+    wanted += [(name, nearest(t)) for t in lights for name in names]
+    choice = [0] * len(wanted)
+    while True:
+        chosen = [k for k in range(len(wanted)) if choice[k] < len(wanted[k][1])]
+        captures = [
+            CalibrationCapture(wanted[k][0], *wanted[k][1][choice[k]], plan.exposures_ms)
+            for k in chosen
+        ]
+        candidate = dataclasses.replace(plan, calibration=tuple(captures))
+        unplaced = [u.light_index for u in candidate.unplaced(config) if u.kind == "calibration"]
+        if not unplaced:
+            return candidate
+        for index in unplaced:  # the calibration list index: try the next pair
+            choice[chosen[index]] += 1
+
+
+def console_placer(name: str | None) -> None:
+    """Ask the person at the rig to put ``name`` (None: the object) in place; waits for Enter."""
+    what = "the object" if name is None else TARGET_WORDS.get(name, f"the {name} target")
+    input(f"place {what} at the object's place and press Enter ")
+
+
 def _run_capture(args: argparse.Namespace) -> int:
     from capture.dataset import Dataset
     from capture.plan import SweepPlan, grid_plan, load_plan
@@ -108,9 +169,13 @@ def _run_capture(args: argparse.Namespace) -> int:
             plan = grid_plan(
                 args.cameras, args.lights, exposures_ms=(args.exposure_ms,), layout=args.layout
             )
+            if args.calibrate:
+                plan = simulated_calibration(plan, config)
         else:
             if args.config is None or args.plan is None:
                 raise InputError("a capture needs --config and --plan (or --sim)")
+            if args.calibrate:
+                raise InputError("--calibrate is for --sim; list [[calibration]] in the plan")
             config, plan = load_config(args.config), load_plan(args.plan)
         dataset = Dataset.create(
             args.output,
@@ -137,15 +202,17 @@ def _capture(config: Any, dataset: Any, plan: Any, *, progress: bool) -> Any:
     from rig.hardware import Rig
 
     with contextlib.ExitStack() as stack:
+        placer: Any = console_placer
         if config.camera.backend == "simulated":
             from sim.simulated_rig import SimulatedRig
 
             simulated = stack.enter_context(SimulatedRig(config))
             rig = simulated.rig()
+            placer = rig.camera.place_target  # type: ignore[union-attr]
         else:
             rig = Rig(config, open_camera(config))
         stack.enter_context(rig)
-        session = CaptureSession(rig, dataset, plan, progress=progress)
+        session = CaptureSession(rig, dataset, plan, progress=progress, targets=placer)
         previous = signal.getsignal(signal.SIGINT)
 
         def on_interrupt(number: int, frame: Any) -> None:

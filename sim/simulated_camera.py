@@ -5,7 +5,11 @@ state in the simulated rig, a plain function in tests) for the pose and the ligh
 scene with :func:`sim.synthetic_camera.render_under_light` (camera on the arm looking at the
 origin; a directional light of irradiance ``intensity``, or a point light at ``light_distance``
 delivering that irradiance at the origin) and records it through the sensor model
-(:mod:`sim.sensor`), exactly as ``rig sim photo`` does. A turntable angle rotates the object,
+(:mod:`sim.sensor`), exactly as ``rig sim photo`` does. :meth:`SimulatedCamera.place_target`
+puts a calibration target at the object's place instead (:data:`TARGETS`, rendered by
+:mod:`sim.calibration_targets`): the ChArUco board :data:`BOARD` lying flat, the mirror sphere
+(radius :data:`MIRROR_SPHERE_RADIUS`) reflecting the rig's light, or the white target
+:data:`WHITE_TARGET`; ``None`` puts the object back. A turntable angle rotates the object,
 which is the same as rotating camera and light the other way about ``+z``.
 
 Sensor noise is seeded by the pose, the light and the exposure, so two captures of the same
@@ -24,6 +28,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -33,12 +38,46 @@ from rig.devices import CameraTimeoutError, Frame, LightState, RigStateSource, f
 from rig.directions import angles_deg_from_direction, direction_from_angles_deg
 from rig.errors import DeviceError, InputError
 from rig.pose import RigPose
+from sim.calibration_targets import (
+    DiscLight,
+    WhiteTarget,
+    render_charuco,
+    render_mirror_sphere,
+    render_white_target,
+)
 from sim.scenes import build_scene
 from sim.sensor import Sensor, bayer_mosaic, expose, to_linear16, to_srgb8
 from sim.sensor_files import write_dng
 from sim.synthetic_camera import DirectionalLight, PointLight, render_under_light
 
-__all__ = ["SimulatedCamera", "capture_seed"]
+__all__ = [
+    "BOARD",
+    "BOARD_RADIANCE",
+    "LIGHT_DISC_DEG",
+    "MIRROR_SPHERE_RADIUS",
+    "TARGETS",
+    "WHITE_TARGET",
+    "SimulatedCamera",
+    "capture_seed",
+]
+
+#: Calibration targets :meth:`SimulatedCamera.place_target` knows (capture plan names).
+TARGETS = ("charuco", "mirror-sphere", "white-target")
+#: The simulator's ChArUco board: squares x and y, square and marker length (scene units) and
+#: OpenCV dictionary; coarse enough to be found in 160-pixel images of a 40-degree camera at 4
+#: units (``processing.calibrate_dataset.DEFAULT_BOARD`` is the same board).
+BOARD = (5, 5, 0.45, 0.33, "DICT_4X4_50")
+#: Radiance of the board's print per unit reflectance per unit light level (evenly lit; white
+#: print, reflectance 0.8, stays below saturation at the default 40 ms exposure).
+BOARD_RADIANCE = 0.25
+#: The chrome ball's radius, scene units, centred at the origin.
+MIRROR_SPHERE_RADIUS = 1.0
+#: Angular size of the light as the mirror sphere sees it, degrees: the highlight must cover
+#: a few pixels for its centroid to be sub-pixel (a 2-degree disc hides between pixel centres
+#: at 160 pixels).
+LIGHT_DISC_DEG = 4.0
+#: The flat white target, face up at the origin.
+WHITE_TARGET = WhiteTarget(albedo=0.8, half_size=1.5)
 
 
 def capture_seed(seed: int, pose: RigPose, light: LightState, exposure_ms: float) -> int:
@@ -125,6 +164,8 @@ class SimulatedCamera:
         self._captures = 0
         self._closed = False
         self._last_render: tuple[tuple[Any, ...], NDArray[np.float32]] | None = None
+        self.target: str | None = None
+        self._board: cv2.aruco.CharucoBoard | None = None
 
     @classmethod
     def from_config(
@@ -162,9 +203,60 @@ class SimulatedCamera:
         """Make the next ``count`` captures time out (fault injection on demand)."""
         self._fail_next += count
 
+    def place_target(self, name: str | None) -> None:
+        """Show calibration target ``name`` (one of :data:`TARGETS`) or, for None, the object.
+
+        Raises
+        ------
+        InputError
+            An unknown target (the message lists the known ones).
+        """
+        if name is not None and name not in TARGETS:
+            raise InputError(
+                f"the simulated camera has no calibration target {name!r}; known: "
+                f"{', '.join(TARGETS)}"
+            )
+        self.target = name
+
+    def _board_object(self) -> cv2.aruco.CharucoBoard:
+        if self._board is None:
+            squares_x, squares_y, square, marker, dictionary = BOARD
+            self._board = cv2.aruco.CharucoBoard(
+                (squares_x, squares_y),
+                square,
+                marker,
+                cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)),
+            )
+        return self._board
+
+    def _render_target(
+        self, camera: PinholeCamera, towards: NDArray[np.float64], level: float
+    ) -> NDArray[np.float32]:
+        """The placed calibration target under a light of ``level`` toward ``towards``."""
+        if self.target == "charuco":
+            scale = BOARD_RADIANCE * level
+            return render_charuco(
+                self._board_object(),
+                camera,
+                white=0.8 * scale,
+                black=0.04 * scale,
+                background=0.15 * scale,
+            )
+        direction = (float(towards[0]), float(towards[1]), float(towards[2]))
+        disc = DiscLight(
+            direction,
+            distance=self.light_distance,
+            angular_size_deg=LIGHT_DISC_DEG,
+            irradiance=level,
+        )
+        if self.target == "mirror-sphere":
+            return render_mirror_sphere(camera, disc, radius=MIRROR_SPHERE_RADIUS)
+        return render_white_target(camera, disc, WHITE_TARGET)
+
     def render(self, pose: RigPose, light: LightState) -> NDArray[np.float32]:
-        """Noiseless linear radiance (H, W, 3) of the scene at ``pose`` under ``light``."""
-        key = (pose, light.level)
+        """Noiseless linear radiance (H, W, 3) at ``pose`` under ``light``: the scene, or the
+        calibration target in place (:meth:`place_target`)."""
+        key = (self.target, pose, light.level)
         if self._last_render is not None and self._last_render[0] == key:
             return self._last_render[1]
         if light.level == 0.0:
@@ -181,6 +273,10 @@ class SimulatedCamera:
                 pose.light_azimuth_deg - pose.turntable_deg, pose.light_inclination_deg
             )
             source: DirectionalLight | PointLight
+            if self.target is not None:
+                rgb = self._render_target(camera, towards, light.level)
+                self._last_render = (key, rgb)
+                return rgb
             if self.light_distance is None:
                 direction = (float(towards[0]), float(towards[1]), float(towards[2]))
                 source = DirectionalLight(direction, irradiance=light.level)
@@ -230,6 +326,7 @@ class SimulatedCamera:
             light_on=light.on,
             light_intensity=light.intensity,
             scene=self.scene,
+            target=self.target,
             output=self.output,
         )
         if self.output == "dng":
