@@ -185,6 +185,8 @@ class CaptureSession:
             done = completed_images(documents)
             history = runs(documents)
             previous = history[-1].uid if history else None
+        # A process killed mid-write leaves a temporary file (never under a final name).
+        self.dataset.remove_partials()
         retake = self.dataset.verify().retake & done
         done -= retake
         pending = [e for e in events if e.key not in done]

@@ -226,3 +226,24 @@ def test_sigkill_then_resume_equals_an_uninterrupted_run(
     report = dataset.verify()
     assert report.ok and report.complete and not report.unexpected
     assert len(dataset.records) == len(reference)  # nothing duplicated
+
+
+def test_resume_removes_what_a_kill_mid_write_left(
+    tmp_path: Path, reference: dict[str, str]
+) -> None:
+    with _session(tmp_path, _config(), _plan()) as (session, _, rig):
+        capture = rig.capture
+
+        def capture_then_pause(exposure_ms: float) -> Any:
+            session.request_pause()
+            return capture(exposure_ms)
+
+        rig.capture = capture_then_pause  # type: ignore[method-assign]
+        assert session.run().exit_status == "paused"
+    # A process killed between writing an image's temporary file and renaming it.
+    stray = tmp_path / "d" / "images" / ".light_c001_l002_e0.4242.partial.png"
+    stray.write_bytes(b"half an image")
+    with _session(tmp_path, _config(), _plan()) as (session, _, _):
+        assert session.run().exit_status == "success"
+    assert not stray.exists()
+    assert _digests(tmp_path / "d") == reference
