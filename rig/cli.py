@@ -178,6 +178,7 @@ def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: 
 
     from render.output import IMAGE_SUFFIXES, display_picture, write_image, write_sequence
     from render.relight_mode import open_relighter
+    from render.relighter import RelightSettings
     from rig.camera_model import PinholeCamera
 
     if field.sample_kind == "pixels":
@@ -191,6 +192,8 @@ def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: 
             args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
         )
     mode, models = _relight_mode(args, field)
+    for warning in _relight_warnings(field, camera, panorama, mode, models):
+        print(warning)
     relighter = open_relighter(field, mode, models)
     if suffix in IMAGE_SUFFIXES:
         relighter.set_lighting(panorama, yaw_deg=args.yaw, exposure=args.exposure)
@@ -200,7 +203,9 @@ def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: 
             _write_pyvista_picture(args, field, camera, image)
         else:
             write_image(args.output, image.rgb, image.coverage)
-        _report_relit(args, image.holes, image.outside_fraction, models is not None)
+        _report_relit(
+            args, image.holes, image.outside_fraction, not isinstance(mode, RelightSettings)
+        )
         return 0
     if args.frames < 1:
         raise RigError(f"--frames must be at least 1, got {args.frames}")
@@ -228,6 +233,33 @@ def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: 
     return 0
 
 
+def _relight_warnings(field: Any, camera: Any, panorama: Any, mode: Any, models: Any) -> list[Any]:
+    """What to expect of this relighting (render.guards); interpolation only for the field ones."""
+    import contextlib
+
+    from processing.sample_model_store import default_models_path, read_sample_models
+    from render.guards import (
+        clipped_panorama_warning,
+        fitted_lobe_alpha,
+        ghosting_warning,
+        view_warning,
+    )
+    from render.relighter import RelightSettings
+
+    found = [clipped_panorama_warning(panorama.rgb)]
+    if isinstance(mode, RelightSettings):
+        if field.sample_kind == "points":
+            found.append(view_warning(field.camera_directions, camera))
+        saved = default_models_path(field.path)
+        if models is None and saved.exists():
+            with contextlib.suppress(RigError):
+                models = read_sample_models(saved, field)
+        alpha = None if models is None else fitted_lobe_alpha(models)
+        if alpha is not None:
+            found.append(ghosting_warning(field.light_directions, alpha))
+    return [w for w in found if w is not None]
+
+
 def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any]:
     """The relighting mode the flags ask for, and the field's models when it needs them."""
     from dataclasses import replace
@@ -252,7 +284,7 @@ def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any]:
         print(f"relighting mode: {choice.reason}")
         if isinstance(choice.mode, ModelRelightSettings):
             return replace(choice.mode, grid_height=args.grid), choice.models
-        return choice.mode, None
+        return choice.mode, choice.models  # the fit still informs the warnings
     settings = RelightSettings(args.scheme or "sampled", k=k, sampler=args.sampler, m=args.m,
                                n=args.n)  # fmt: skip
     if args.interp:

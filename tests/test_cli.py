@@ -173,3 +173,16 @@ def test_relight_chooses_models_by_held_out_lights(
     saved.write_bytes(b"garbage")
     assert main([*base, "--models", str(saved), "-o", str(tmp_path / "x.png")]) == 2
     assert "not a readable models file" in capsys.readouterr().err
+
+
+def test_relight_warns_where_interpolation_fails(
+    tmp_path: Path, small_field: Path, courtyard_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    base = ["relight", str(small_field), "--env", str(courtyard_path), "--size", "48x48",
+            "-o", str(tmp_path / "x.png")]  # fmt: skip
+    assert main([*base, "--view", "30,50"]) == 0  # fits and saves the models beside the field
+    capsys.readouterr()
+    assert main([*base, "--view", "30,50", "--scheme", "pixels"]) == 0
+    assert "warning (ghosting)" in capsys.readouterr().out
+    assert main([*base, "--view", "30,150", "--scheme", "pixels"]) == 0  # from below
+    assert "warning (view-outside)" in capsys.readouterr().out
