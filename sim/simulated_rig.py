@@ -10,10 +10,12 @@ devices filled in, so the real drivers (:class:`rig.hardware.Rig`) talk to them 
 from __future__ import annotations
 
 import dataclasses
-import math
 from types import TracebackType
 
 from rig.config import RigConfig, simulated_config
+from rig.config_cameras import SimulatedCameraConfig
+from rig.devices import LightState
+from rig.errors import InputError
 from rig.hardware import Rig, servo_axis
 from rig.pose import RigPose
 from sim.dynamixel_emulator import FaultConfig, ServoChainEmulator, ServoSpec
@@ -126,15 +128,14 @@ class SimulatedRig:
 def simulated_camera(rig: Rig) -> SimulatedCamera:
     """The config's simulated camera, seeing the scene at ``rig``'s measured pose and light."""
     camera = rig.config.camera
-    if getattr(camera, "backend", None) != "simulated":
-        raise ValueError(f"the rig config's camera is {camera.backend!r}, not simulated")
+    if not isinstance(camera, SimulatedCameraConfig):
+        raise InputError(f"the rig config's camera is {camera.backend!r}, not simulated")
     root = None if rig.config.source is None else rig.config.source.parent
 
-    def state() -> tuple[RigPose, object]:
+    def state() -> tuple[RigPose, LightState]:
         pose, light = rig.state()
         # Servo positions are whole ticks: round to 1/100 degree so that a pose the plan asked
         # for renders (and seeds its noise) identically on every run.
-        rounded = RigPose.from_roles({r: round(v, 2) for r, v in pose.items() if not math.isnan(v)})
-        return rounded, light
+        return RigPose.from_roles({r: round(v, 2) for r, v in pose.items()}), light
 
-    return SimulatedCamera.from_config(camera, state, root=root)  # type: ignore[arg-type]
+    return SimulatedCamera.from_config(camera, state, root=root)
