@@ -24,9 +24,9 @@ from sim.simulated_camera import SimulatedCamera
 
 __all__ = ["SimulatedRig", "simulated_camera"]
 
-#: GRBL settings of the emulated gantry: fast axes (degrees per minute, per second squared) so
-#: simulated sessions are quick; the driver's feed (config) is what limits a move.
-GANTRY_SETTINGS: dict[int, float] = {110: 36_000.0, 111: 36_000.0, 120: 3_600.0, 121: 3_600.0}
+#: GRBL settings of the emulated gantry before the config's axes are applied: max rates
+#: ($110-$112, units/min) high enough that the driver's feed limits a move.
+GANTRY_SETTINGS: dict[int, float] = {110: 360_000.0, 111: 360_000.0, 112: 360_000.0}
 
 
 def _servo_ticks(config: RigConfig, role: str, degrees: float) -> int:
@@ -67,7 +67,11 @@ class SimulatedRig:
         # The gantry stands at the park pose too (as a real one left there after a session).
         position = [0.0, 0.0, 0.0]
         for role, axis in base.axes_of("grbl").items():
-            position["XYZ".index(str(axis.grbl_axis))] = axis.to_device(base.park.get(role))
+            index = "XYZ".index(str(axis.grbl_axis))
+            position[index] = axis.to_device(base.park.get(role))
+            # The controller accelerates as the config says ($120-$122, units/s^2), so the
+            # plan's motion model and the emulated motion agree.
+            settings[120 + index] = axis.acceleration_deg_s2 * axis.units_per_deg
         self.servos = ServoChainEmulator(specs, faults=servo_faults) if specs else None
         try:
             self.gantry = GrblEmulator(
