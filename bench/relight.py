@@ -132,6 +132,25 @@ def bench_speed(out: Path, points: int, repeats: int, panorama: Panorama) -> dic
     return result
 
 
+def _loop_ms(relighter: RelightEngine, panorama: Panorama, repeats: int) -> dict[str, float]:
+    """The interactive loop: a new lighting (rotated environment), or a new view, and render."""
+    yaws = iter(np.linspace(0.0, 360.0, 1000))
+    azimuths = iter(np.linspace(0.0, 360.0, 1000))
+
+    def new_lighting() -> None:
+        relighter.set_lighting(panorama, yaw_deg=float(next(yaws)))
+        relighter.render()
+
+    def new_view() -> None:
+        relighter.set_view(PinholeCamera(float(next(azimuths)), 50.0))
+        relighter.render()
+
+    return {
+        "loop_new_lighting_ms": _median_ms(new_lighting, repeats),
+        "loop_new_view_ms": _median_ms(new_view, repeats),
+    }
+
+
 def _bench_scheme(
     field: ReflectanceField,
     settings: RelightSettings,
@@ -153,17 +172,6 @@ def _bench_scheme(
     radiance = relight_view(view_field, lighting)
     splat_ms = _median_ms(lambda: splat(plan, radiance), repeats)
     floor_ms = 1e3 * view_field.radiance.nbytes / bandwidth
-    yaws = iter(np.linspace(0.0, 360.0, 1000))
-    azimuths = iter(np.linspace(0.0, 360.0, 1000))
-
-    def new_lighting() -> None:
-        relighter.set_lighting(panorama, yaw_deg=float(next(yaws)))
-        relighter.render()
-
-    def new_view() -> None:
-        relighter.set_view(PinholeCamera(float(next(azimuths)), 50.0))
-        relighter.render()
-
     return {
         "scheme": settings.scheme,
         "interpolation": settings.interpolation,
@@ -176,8 +184,7 @@ def _bench_scheme(
         "blend_field_ms": _median_ms(lambda: blend_field(field, blend), 3),
         "view_setup_ms": _median_ms(lambda: relighter.set_view(camera), 3),
         "splat_ms": splat_ms,
-        "loop_new_lighting_ms": _median_ms(new_lighting, repeats),
-        "loop_new_view_ms": _median_ms(new_view, repeats),
+        **_loop_ms(relighter, panorama, repeats),
         "needed_samples": len(view_field.samples),
         "cameras_blended": len(blend.cameras),
     }
@@ -197,17 +204,6 @@ def _bench_model_scheme(
     relighter.set_view(camera)
     relight_ms = _median_ms(lambda: relighter.render().seconds["relight"], repeats)
     image = relighter.render()
-    yaws = iter(np.linspace(0.0, 360.0, 1000))
-    azimuths = iter(np.linspace(0.0, 360.0, 1000))
-
-    def new_lighting() -> None:
-        relighter.set_lighting(panorama, yaw_deg=float(next(yaws)))
-        relighter.render()
-
-    def new_view() -> None:
-        relighter.set_view(PinholeCamera(float(next(azimuths)), 50.0))
-        relighter.render()
-
     return {
         "scheme": "model",
         "model": relighter.choice.chosen,
@@ -218,8 +214,7 @@ def _bench_model_scheme(
         "relight_ms": image.seconds["relight"] * 1e3,
         "splat_ms": image.seconds["splat"] * 1e3,
         "view_setup_ms": _median_ms(lambda: relighter.set_view(camera), 3),
-        "loop_new_lighting_ms": _median_ms(new_lighting, repeats),
-        "loop_new_view_ms": _median_ms(new_view, repeats),
+        **_loop_ms(relighter, panorama, repeats),
     }
 
 

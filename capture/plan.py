@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 import os
 import re
-import tomllib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,7 +35,7 @@ from capture.plan_order import (
     schedules,
 )
 from rig.config import RigConfig
-from rig.config_schema import Table
+from rig.config_schema import Table, read_toml
 from rig.directions import angles_deg_from_direction, hemisphere_layout
 from rig.errors import ConfigError, InputError
 from rig.pose import CAMERA_ROLES, LIGHT_ROLES, ROLES, RigPose
@@ -620,15 +619,4 @@ def parse_plan(data: Mapping[str, Any], source: str | os.PathLike[str] | None = 
 
 def load_plan(path: str | os.PathLike[str]) -> SweepPlan:
     """Read and validate a sweep plan file (TOML); see ``docs/plans.md``."""
-    target = Path(path)
-    try:
-        text = target.read_text(encoding="utf-8")
-    except OSError as error:
-        raise InputError(f"{target}: cannot read the plan ({error.strerror})") from None
-    except UnicodeDecodeError as error:
-        raise InputError(f"{target}: the plan is not UTF-8 text ({error})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise InputError(f"{target}: not valid TOML: {error}") from None
-    return parse_plan(data, target)
+    return parse_plan(read_toml(path, "plan"), Path(path))

@@ -15,7 +15,6 @@ Axis conversion (both devices): ``device = direction * scale * (rig_deg - offset
 from __future__ import annotations
 
 import os
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -31,7 +30,7 @@ from rig.config_cameras import (
     camera_to_dict,
     parse_camera,
 )
-from rig.config_schema import Table, dump_toml
+from rig.config_schema import Table, dump_toml, read_toml
 from rig.errors import ConfigError, InputError
 from rig.pose import REQUIRED_ROLES, ROLES, RigPose
 from rig.safety import ForbiddenZone, SafetyConfig, parse_safety, pose_violation, safety_to_dict
@@ -468,18 +467,7 @@ def parse_config(
 
 def load_config(path: str | os.PathLike[str]) -> RigConfig:
     """Read and validate a rig config file (TOML); see ``docs/rig-config.md``."""
-    target = Path(path)
-    try:
-        text = target.read_text(encoding="utf-8")
-    except OSError as error:
-        raise ConfigError(f"{target}: cannot read the rig config ({error.strerror})") from None
-    except UnicodeDecodeError as error:
-        raise ConfigError(f"{target}: the rig config is not UTF-8 text ({error})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise ConfigError(f"{target}: not valid TOML: {error}") from None
-    return parse_config(data, target)
+    return parse_config(read_toml(path, "rig config"), Path(path))
 
 
 def simulated_config(

@@ -10,13 +10,16 @@ and arrays of tables); ``tomllib`` only reads, and this is too small to justify 
 from __future__ import annotations
 
 import math
+import os
 import re
+import tomllib
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any, TypeVar
 
 from rig.errors import ConfigError
 
-__all__ = ["Table", "dump_toml"]
+__all__ = ["Table", "dump_toml", "read_toml"]
 
 T = TypeVar("T")
 _MISSING: Any = object()
@@ -233,3 +236,18 @@ def dump_toml(document: Mapping[str, Any]) -> str:
     lines: list[str] = []
     _emit(document, [], lines)
     return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def read_toml(path: str | os.PathLike[str], what: str) -> dict[str, Any]:
+    """The tables of a TOML file; ConfigError naming the file (``what`` it is) when unreadable."""
+    target = Path(path)
+    try:
+        text = target.read_text(encoding="utf-8")
+    except OSError as error:
+        raise ConfigError(f"{target}: cannot read the {what} ({error.strerror})") from None
+    except UnicodeDecodeError as error:
+        raise ConfigError(f"{target}: the {what} is not UTF-8 text ({error})") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(f"{target}: not valid TOML: {error}") from None

@@ -167,10 +167,9 @@ class LightGantry:
             self.gantry.home()
 
     def move_to_deg(self, targets: Mapping[str, float]) -> None:
-        here = self.position_deg()
-        azimuth = targets.get("light_azimuth", here["light_azimuth"])
-        inclination = targets.get("light_inclination", here["light_inclination"])
-        self.gantry.move_to_deg(azimuth, inclination, wait=False)
+        # A status round trip only when an axis keeps its place (Rig.move_to names both).
+        here = targets if set(self.roles) <= set(targets) else {**self.position_deg(), **targets}
+        self.gantry.move_to_deg(here["light_azimuth"], here["light_inclination"], wait=False)
 
     def wait_until_arrived(self, timeout_s: float) -> None:
         self.gantry.wait_until_idle(timeout_s)

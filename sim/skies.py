@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.colour import REC709_LUMINANCE, linear_to_srgb, srgb_to_linear
+from rig.colour import linear_to_srgb, luminance, srgb_to_linear
 from rig.directions import (
     direction_from_angles_deg,
     panorama_directions,
@@ -72,11 +72,10 @@ def procedural_sky(
     disc = cosine >= math.cos(math.radians(sun_diameter_deg / 2.0))
     if not disc.any():
         disc[np.unravel_index(np.argmax(cosine), cosine.shape)] = True
-    luma = REC709_LUMINANCE.astype(np.float64)
-    rest = float(np.sum((rgb @ luma) * omega * ~disc))
+    rest = float(np.sum(luminance(rgb) * omega * ~disc))
     sun_energy = rest * sun_share / (1.0 - sun_share)
     white = np.array([1.0, 0.95, 0.85])
-    radiance = sun_energy / float(np.sum(omega[disc])) / float(white @ luma)
+    radiance = sun_energy / float(np.sum(omega[disc])) / float(luminance(white))
     rgb[disc] = radiance * white
     return rgb.astype(np.float32)
 
@@ -89,7 +88,7 @@ def ldr_photo(rgb: NDArray[np.floating], *, exposure: float | None = None) -> ND
     """
     linear = np.asarray(rgb, dtype=np.float32)
     if exposure is None:
-        median = float(np.median(linear @ REC709_LUMINANCE.astype(np.float32)))
+        median = float(np.median(luminance(linear)))
         exposure = 0.18 / median if median > 0 else 1.0
     encoded = np.round(linear_to_srgb(np.clip(linear * exposure, 0.0, 1.0)) * 255.0) / 255.0
     return srgb_to_linear(encoded) / np.float32(exposure)
