@@ -22,7 +22,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.errors import DeviceError, InputError
+from rig.errors import DeviceError, InputError, RigError
 from rig.pose import RigPose
 
 __all__ = [
@@ -33,6 +33,7 @@ __all__ = [
     "LightState",
     "PoseAxes",
     "RigStateSource",
+    "close_after",
     "frame_metadata",
 ]
 
@@ -182,3 +183,15 @@ class PoseAxes(Protocol):
     def close(self) -> None:
         """Leave the device safe (torque off, motion stopped) and release the port."""
         ...
+
+
+def close_after(close: Callable[[], None], error: BaseException | None) -> None:
+    """Close a device on leaving a ``with`` block; leaving on ``error``, a failure to close
+    becomes a note on that error instead of replacing it (the cause matters more)."""
+    if error is None:
+        close()
+        return
+    try:
+        close()
+    except RigError as failure:
+        error.add_note(str(failure))

@@ -30,6 +30,7 @@ from dynamixel_sdk import (
 )
 
 from rig import dynamixel_table as tbl
+from rig.devices import close_after
 from rig.dynamixel_table import Item
 from rig.errors import ConfigError, DeviceError, ProtocolError, RigError, SafetyError
 
@@ -283,14 +284,7 @@ class DynamixelChain:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        if exc is None:
-            self.close()
-            return
-        try:
-            self.close()
-        except RigError as close_error:
-            # Keep the original exception; say that the servos may still hold torque.
-            exc.add_note(str(close_error))
+        close_after(self.close, exc)  # a failed torque-off is said, never hidden
 
     def _shutdown(self) -> list[str]:
         failures = []

@@ -20,7 +20,7 @@ from dataclasses import replace
 from types import TracebackType
 
 from rig.config import XM430_W350, AxisConfig, RigConfig
-from rig.devices import Camera, Frame, LightState
+from rig.devices import Camera, Frame, LightState, close_after
 from rig.dynamixel import DynamixelChain, ServoAxisConfig
 from rig.errors import DeviceError, InputError, RigError
 from rig.grbl import GantryAxes, GantryAxisConfig, GrblGantry
@@ -246,13 +246,7 @@ class Rig:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        if exc is None:
-            self.close()
-            return
-        try:
-            self.close()
-        except RigError as error:  # the error that got us here matters more; keep both
-            exc.add_note(str(error))
+        close_after(self.close, exc)
 
     def close(self) -> None:
         """Light off, motion stopped, torque off, ports closed; every step is attempted."""
