@@ -40,18 +40,22 @@ from render.relight import (
     relight_view,
 )
 from render.relight_mode import MOST_ACCURATE_MODELS, RelightEngine, RelightMode, open_relighter
-from render.relighter import Relighter, RelightSettings
+from render.relighter import Relighter, RelightSettings, RelitImage
 from render.splat import splat
 from rig.camera_model import PinholeCamera
 from sim.field import field_cameras, simulate_field
-from sim.ground_truth import environment_lights, shade_environment
+from sim.ground_truth import environment_lights, shade_environment, shade_environment_views
 from sim.scenes import SurfaceSamples, build_scene, get_scene
-from sim.synthetic_camera import SyntheticImage, camera_visibility, image_of_points
+from sim.synthetic_camera import (
+    SyntheticImage,
+    camera_visibility,
+    image_of_points,
+)
 
 PANORAMAS = Path(__file__).resolve().parents[2] / "shared" / "data" / "panoramas"
 
 
-def _median_ms(run: Callable[[], object], repeats: int) -> float:
+def median_ms(run: Callable[[], object], repeats: int) -> float:
     run()
     times = []
     for _ in range(repeats):
@@ -61,7 +65,7 @@ def _median_ms(run: Callable[[], object], repeats: int) -> float:
     return float(np.median(times)) * 1e3
 
 
-def _field(
+def field_path(
     out: Path, scene: str, cameras: int, lights: int, points: int, size: int, dtype: str
 ) -> Path:
     path = out / "fields" / f"{scene}-S{cameras}-T{lights}-{points}-{size}px-{dtype}.zarr"
@@ -75,11 +79,11 @@ def _read_slab(field: ReflectanceField, camera: int) -> NDArray[np.float32]:
     return np.asarray(field.radiance[camera], dtype=np.float32)
 
 
-def _copy_bandwidth() -> float:
+def copy_bandwidth() -> float:
     """Bytes per second moved by a large copy (read + write)."""
     source = np.ones(50_000_000, dtype=np.float32)
     target = np.empty_like(source)
-    ms = _median_ms(lambda: np.copyto(target, source), 5)
+    ms = median_ms(lambda: np.copyto(target, source), 5)
     return 2 * source.nbytes / (ms * 1e-3)
 
 
@@ -89,15 +93,17 @@ def bench_speed(out: Path, points: int, repeats: int, panorama: Panorama) -> dic
     storage = {}
     for dtype in ("float16", "float32"):
         start = time.perf_counter()
-        path = _field(out, "glossy-sphere", 30, 30, points, 512, dtype)
+        path = field_path(out, "glossy-sphere", 30, 30, points, 512, dtype)
         build = time.perf_counter() - start
         size = sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
         field = ReflectanceField.open(path, cached_slabs=1)
-        load = _median_ms(partial(_read_slab, field, 3), 3)
+        load = median_ms(partial(_read_slab, field, 3), 3)
         storage[dtype] = {"bytes": size, "slab_load_ms": load, "build_s_if_new": build}
     result["storage"] = storage
-    field = ReflectanceField.open(_field(out, "glossy-sphere", 30, 30, points, 512, "float16"), 30)
-    bandwidth = _copy_bandwidth()
+    field = ReflectanceField.open(
+        field_path(out, "glossy-sphere", 30, 30, points, 512, "float16"), 30
+    )
+    bandwidth = copy_bandwidth()
     result["copy_bandwidth_GBps"] = bandwidth / 1e9
     camera = PinholeCamera(20.0, 50.0)
     rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -132,8 +138,20 @@ def bench_speed(out: Path, points: int, repeats: int, panorama: Panorama) -> dic
     return result
 
 
-def _loop_ms(relighter: RelightEngine, panorama: Panorama, repeats: int) -> dict[str, float]:
-    """The interactive loop: a new lighting (rotated environment), or a new view, and render."""
+def loop_ms(
+    relighter: RelightEngine,
+    panorama: Panorama,
+    repeats: int,
+    camera: PinholeCamera | None = None,
+) -> dict[str, float]:
+    """The interactive loop: a new lighting (rotated environment), or a new view, and render.
+
+    New views turn ``camera`` (default a 512 x 512 view at 50 degrees inclination) in azimuth;
+    a given ``camera`` is also the view of the new lightings (else the engine's current view).
+    """
+    template = camera if camera is not None else PinholeCamera(0.0, 50.0)
+    if camera is not None:
+        relighter.set_view(camera)
     yaws = iter(np.linspace(0.0, 360.0, 1000))
     azimuths = iter(np.linspace(0.0, 360.0, 1000))
 
@@ -142,12 +160,12 @@ def _loop_ms(relighter: RelightEngine, panorama: Panorama, repeats: int) -> dict
         relighter.render()
 
     def new_view() -> None:
-        relighter.set_view(PinholeCamera(float(next(azimuths)), 50.0))
+        relighter.set_view(replace(template, azimuth_deg=float(next(azimuths))))
         relighter.render()
 
     return {
-        "loop_new_lighting_ms": _median_ms(new_lighting, repeats),
-        "loop_new_view_ms": _median_ms(new_view, repeats),
+        "loop_new_lighting_ms": median_ms(new_lighting, repeats),
+        "loop_new_view_ms": median_ms(new_view, repeats),
     }
 
 
@@ -160,7 +178,7 @@ def _bench_scheme(
     repeats: int,
 ) -> dict[str, Any]:
     relighter = Relighter(field, settings)
-    lighting_ms = _median_ms(lambda: relighter.set_lighting(panorama, yaw_deg=7.0), repeats)
+    lighting_ms = median_ms(lambda: relighter.set_lighting(panorama, yaw_deg=7.0), repeats)
     relighter.set_view(camera)
     relighter.render()
     relighter.render()  # the second frame at this view builds the view's blended field
@@ -168,9 +186,9 @@ def _bench_scheme(
     assert view_field is not None and lighting is not None and view is not None
     blend, plan = view
     assert plan is not None
-    relight_ms = _median_ms(lambda: relight_view(view_field, lighting), repeats)
+    relight_ms = median_ms(lambda: relight_view(view_field, lighting), repeats)
     radiance = relight_view(view_field, lighting)
-    splat_ms = _median_ms(lambda: splat(plan, radiance), repeats)
+    splat_ms = median_ms(lambda: splat(plan, radiance), repeats)
     floor_ms = 1e3 * view_field.radiance.nbytes / bandwidth
     return {
         "scheme": settings.scheme,
@@ -181,10 +199,10 @@ def _bench_scheme(
         "relight_new_lighting_ms": relight_ms,
         "bandwidth_floor_ms": floor_ms,
         "floor_ratio": relight_ms / floor_ms,
-        "blend_field_ms": _median_ms(lambda: blend_field(field, blend), 3),
-        "view_setup_ms": _median_ms(lambda: relighter.set_view(camera), 3),
+        "blend_field_ms": median_ms(lambda: blend_field(field, blend), 3),
+        "view_setup_ms": median_ms(lambda: relighter.set_view(camera), 3),
         "splat_ms": splat_ms,
-        **_loop_ms(relighter, panorama, repeats),
+        **loop_ms(relighter, panorama, repeats),
         "needed_samples": len(view_field.samples),
         "cameras_blended": len(blend.cameras),
     }
@@ -200,9 +218,9 @@ def _bench_model_scheme(
 ) -> dict[str, Any]:
     """The interactive loop through per-sample models (no blended field: the models are it)."""
     relighter = ModelRelighter(field, settings, models)
-    lighting_ms = _median_ms(lambda: relighter.set_lighting(panorama, yaw_deg=7.0), repeats)
+    lighting_ms = median_ms(lambda: relighter.set_lighting(panorama, yaw_deg=7.0), repeats)
     relighter.set_view(camera)
-    relight_ms = _median_ms(lambda: relighter.render().seconds["relight"], repeats)
+    relight_ms = median_ms(lambda: relighter.render().seconds["relight"], repeats)
     image = relighter.render()
     return {
         "scheme": "model",
@@ -213,18 +231,18 @@ def _bench_model_scheme(
         "render_ms": relight_ms,
         "relight_ms": image.seconds["relight"] * 1e3,
         "splat_ms": image.seconds["splat"] * 1e3,
-        "view_setup_ms": _median_ms(lambda: relighter.set_view(camera), 3),
-        **_loop_ms(relighter, panorama, repeats),
+        "view_setup_ms": median_ms(lambda: relighter.set_view(camera), 3),
+        **loop_ms(relighter, panorama, repeats),
     }
 
 
 def _bench_equations(out: Path, panorama: Panorama) -> dict[str, Any]:
     """Literal eq. 2 against its rearranged form and eq. 3, at equal sizes, in one run."""
-    field = ReflectanceField.open(_field(out, "glossy-sphere", 30, 30, 50_000, 256, "float32"))
+    field = ReflectanceField.open(field_path(out, "glossy-sphere", 30, 30, 50_000, 256, "float32"))
     camera = PinholeCamera(20.0, 50.0, width=128, height=128)
     blend = blend_cameras(field, camera, "barycentric")
     rgb = panorama.rgb
-    literal_ms = _median_ms(
+    literal_ms = median_ms(
         lambda: relight_pixels_literal(field, rgb, blend, "barycentric", grid_height=64), 1
     )
 
@@ -234,10 +252,10 @@ def _bench_equations(out: Path, panorama: Panorama) -> dict[str, Any]:
         )
         relight(field, weights, blend)
 
-    rearranged_ms = _median_ms(rearranged, 3)
+    rearranged_ms = median_ms(rearranged, 3)
     relighter = Relighter(field, RelightSettings(scheme="sampled", k=64))
     relighter.set_view(camera)
-    sampled_ms = _median_ms(lambda: (relighter.set_lighting(panorama), relighter.render()), 3)
+    sampled_ms = median_ms(lambda: (relighter.set_lighting(panorama), relighter.render()), 3)
     return {
         "points": 50_000,
         "panorama_directions": 64 * 128,
@@ -253,7 +271,7 @@ def _relative_rmse(relit: NDArray[np.floating], truth: NDArray[np.floating], mas
     return float(np.sqrt(np.mean((relit[mask] - truth[mask]) ** 2) / np.mean(truth[mask] ** 2)))
 
 
-def _between(cameras: list[PinholeCamera], index: int) -> PinholeCamera:
+def between_view(cameras: list[PinholeCamera], index: int) -> PinholeCamera:
     """A view halfway in azimuth between camera ``index`` and its ring neighbour."""
     ring = sorted(
         c.azimuth_deg
@@ -299,6 +317,15 @@ def _score(
     start = time.perf_counter()
     image = engine.render()
     seconds = time.perf_counter() - start
+    return image_errors(image, truth) | {
+        "render_ms": seconds * 1e3,
+        "outside_fraction": image.outside_fraction,
+    }
+
+
+def image_errors(image: RelitImage, truth: Truth) -> dict[str, Any]:
+    """Relative RMSE and PSNR of a relit image over the pixels both it and the truth cover,
+    and the relative RMSE of its relit samples against the true ones."""
     mask = image.coverage & truth.image.coverage
     mse = float(np.mean((image.rgb[mask] - truth.image.rgb[mask]) ** 2))
     peak = float(truth.image.rgb[mask].max())
@@ -309,8 +336,6 @@ def _score(
         "relative_rmse": _relative_rmse(image.rgb, truth.image.rgb, mask),
         "sample_relative_rmse": _relative_rmse(image.radiance, truth.radiance, shown),
         "psnr_db": 10 * np.log10(peak**2 / mse) if mse > 0 else None,
-        "render_ms": seconds * 1e3,
-        "outside_fraction": image.outside_fraction,
     }
 
 
@@ -323,7 +348,7 @@ class Truth:
     shown: NDArray[np.bool_]
 
 
-def _truth(
+def truth_of(
     samples: SurfaceSamples, rgb: NDArray[np.float32], camera: PinholeCamera, shadows: bool
 ) -> Truth:
     directions, light = environment_lights(rgb, TRUTH_GRID)
@@ -332,7 +357,28 @@ def _truth(
     return Truth(image, radiance, camera_visibility(samples, camera))
 
 
-def _environments(name: str) -> dict[str, Panorama]:
+def truths_of_views(
+    samples: SurfaceSamples,
+    rgb: NDArray[np.float32],
+    cameras: list[PinholeCamera],
+    shadows: bool,
+) -> list[Truth]:
+    """:func:`truth_of` for several views of one lighting, sharing the shadow maps.
+
+    Shadow maps are made once for all the views (``truth_of`` would redo them per view).
+    """
+    directions, light = environment_lights(rgb, TRUTH_GRID)
+    radiances = shade_environment_views(
+        samples, [c.position for c in cameras], directions, light, shadows=shadows
+    )
+    truths = []
+    for camera, radiance in zip(cameras, radiances, strict=True):
+        image = image_of_points(samples, camera, radiance)
+        truths.append(Truth(image, radiance, camera_visibility(samples, camera)))
+    return truths
+
+
+def environments(name: str) -> dict[str, Panorama]:
     full = read_panorama(PANORAMAS / name)
     upper = full.rgb.copy()
     upper[full.rgb.shape[0] // 2 :] = 0.0  # an object on a black stand
@@ -361,7 +407,7 @@ def bench_accuracy(out: Path, quick: bool) -> tuple[list[dict[str, Any]], list[d
         shadows = not get_scene(scene).convex
         for cameras, lights, points, size in ACCURACY_FIELDS[2:3] if quick else ACCURACY_FIELDS:
             samples = build_scene(scene, points)
-            path = _field(out, scene, cameras, lights, points, size, "float32")
+            path = field_path(out, scene, cameras, lights, points, size, "float32")
             field = ReflectanceField.open(path)
             start = time.perf_counter()
             models = models_for_field(field, progress=True)
@@ -373,12 +419,15 @@ def bench_accuracy(out: Path, quick: bool) -> tuple[list[dict[str, Any]], list[d
                 for method, mode in ACCURACY_METHODS.items()
             }
             index = len(field.cameras) // 2
-            views = {"captured": field.cameras[index], "between": _between(field.cameras, index)}
+            views = {
+                "captured": field.cameras[index],
+                "between": between_view(field.cameras, index),
+            }
             for name in ("courtyard.exr", "studio.exr"):
                 for (env_name, panorama), (view_name, camera) in product(
-                    _environments(name).items(), views.items()
+                    environments(name).items(), views.items()
                 ):
-                    truth = _truth(samples, panorama.rgb, camera, shadows)
+                    truth = truth_of(samples, panorama.rgb, camera, shadows)
                     for method, engine in engines.items():
                         row = {
                             "scene": scene,

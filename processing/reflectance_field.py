@@ -166,3 +166,48 @@ class ReflectanceField:
     def load(self) -> NDArray[np.floating]:
         """The whole radiance array (S, T, P, 3) in memory, in its storage dtype."""
         return np.asarray(self.radiance[...])
+
+    def subset(
+        self,
+        *,
+        cameras: NDArray[np.integer] | None = None,
+        lights: NDArray[np.integer] | None = None,
+        samples: NDArray[np.integer] | None = None,
+    ) -> ReflectanceField:
+        """A part of the field, held in memory: the chosen cameras, lights and samples.
+
+        Hold-out tests (:mod:`render.advisor`) fit and relight such parts the way they would
+        the whole field. Pixel fields keep all their pixels (their image shape).
+
+        Parameters
+        ----------
+        cameras, lights, samples : ndarray of int, optional; indices to keep (default all)
+        """
+        s_count, t_count, p_count = self.shape
+        keep_s = np.arange(s_count) if cameras is None else np.asarray(cameras, dtype=np.int64)
+        keep_t = np.arange(t_count) if lights is None else np.asarray(lights, dtype=np.int64)
+        keep_p = np.arange(p_count) if samples is None else np.asarray(samples, dtype=np.int64)
+        for name, index, count in (("camera", keep_s, s_count), ("light", keep_t, t_count),
+                                   ("sample", keep_p, p_count)):  # fmt: skip
+            if index.size == 0 or index.min() < 0 or index.max() >= count:
+                raise InputError(f"{self.path}: {name} indices must be in 0..{count - 1}")
+        if self.image_shape is not None and samples is not None:
+            raise InputError(f"{self.path}: a pixel field keeps all its pixels")
+        radiance = np.stack(
+            [self.camera_slab(int(s))[keep_t][:, keep_p] for s in keep_s]
+        )  # (S', T', P', 3) in memory: subsets are small by purpose
+        return ReflectanceField(
+            # A path of its own: nothing beside the store (a saved model fit) belongs to it.
+            path=self.path.with_name(self.path.name + "[subset]"),
+            light_directions=self.light_directions[keep_t],
+            camera_directions=self.camera_directions[keep_s],
+            cameras=[self.cameras[int(s)] for s in keep_s],
+            visibility=self.visibility[keep_s][:, keep_p],
+            points=None if self.points is None else self.points[keep_p],
+            normals=None if self.normals is None else self.normals[keep_p],
+            image_shape=self.image_shape,
+            light_model=self.light_model,
+            provenance=self.provenance | {"subset_of": str(self.path)},
+            radiance=radiance,
+            cached_slabs=len(keep_s),
+        )

@@ -37,6 +37,7 @@ nearest fitted sample and are reported as holes (:class:`render.relighter.RelitI
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from dataclasses import dataclass, replace
@@ -533,8 +534,30 @@ class ModelRelighter:
             lights = grid_lights(rgb, s.grid_height)
         else:
             lights = sampled_lights(rgb, s.k, sampler=s.sampler, seed=s.seed)
-        self._lighting = prepare_lighting(self.models, lights)
+        self.set_lights(lights)
         return time.perf_counter() - start
+
+    def with_lighting(self, settings: ModelRelightSettings) -> ModelRelighter:
+        """This relighter with other lighting settings, sharing its prepared models.
+
+        Comparing lightings (the advisor) then skips choosing the shadow marks again; the
+        model, visibility and spacing settings must be the same.
+        """
+        mine = (self.settings.model, self.settings.visibility, self.settings.spacing)
+        theirs = (settings.model, settings.visibility, settings.spacing)
+        if mine != theirs:
+            raise InputError(
+                f"with_lighting changes the lighting only; model, visibility and spacing "
+                f"{theirs} differ from {mine}"
+            )
+        other = copy.copy(self)
+        other.settings = settings
+        other._lighting = None
+        return other
+
+    def set_lights(self, lights: EnvironmentLights) -> None:
+        """Light with given directional lights instead of a panorama (hold-out tests)."""
+        self._lighting = prepare_lighting(self.models, lights)
 
     def set_view(self, camera: PinholeCamera) -> float:
         """Plan the splats of a view (point fields); returns the seconds it took."""

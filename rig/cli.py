@@ -14,6 +14,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from rig.cli_advise import add_advise
+from rig.cli_bench import add_bench_parser
 from rig.cli_calibrate import add_calibrate
 from rig.cli_capture import add_capture
 from rig.cli_plan import add_plan
@@ -234,30 +236,22 @@ def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: 
 
 
 def _relight_warnings(field: Any, camera: Any, panorama: Any, mode: Any, models: Any) -> list[Any]:
-    """What to expect of this relighting (render.guards); interpolation only for the field ones."""
+    """What to expect of this relighting (render.guards.relight_warnings).
+
+    Interpolation modes without a fit in hand read the fit saved beside the field, if any: its
+    lobe and held-out error inform the ghosting, sun and noise guards.
+    """
     import contextlib
 
     from processing.sample_model_store import default_models_path, read_sample_models
-    from render.guards import (
-        clipped_panorama_warning,
-        fitted_lobe_alpha,
-        ghosting_warning,
-        view_warning,
-    )
+    from render.guards import relight_warnings
     from render.relighter import RelightSettings
 
-    found = [clipped_panorama_warning(panorama.rgb)]
-    if isinstance(mode, RelightSettings):
-        if field.sample_kind == "points":
-            found.append(view_warning(field.camera_directions, camera))
-        saved = default_models_path(field.path)
-        if models is None and saved.exists():
-            with contextlib.suppress(RigError):
-                models = read_sample_models(saved, field)
-        alpha = None if models is None else fitted_lobe_alpha(models)
-        if alpha is not None:
-            found.append(ghosting_warning(field.light_directions, alpha))
-    return [w for w in found if w is not None]
+    saved = default_models_path(field.path)
+    if isinstance(mode, RelightSettings) and models is None and saved.exists():
+        with contextlib.suppress(RigError):
+            models = read_sample_models(saved, field)
+    return relight_warnings(field, camera, panorama.rgb, mode, models)
 
 
 def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any]:
@@ -581,6 +575,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_relight(commands)
     add_doctor(commands)
     add_plan(commands)
+    add_advise(commands)
+    add_bench_parser(commands)
     add_capture(commands)
     add_calibrate(commands)
     add_process(commands)

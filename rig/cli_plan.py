@@ -28,8 +28,19 @@ def add_plan(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         "one, and each axis' range against its limits. Moves nothing. Exits 0 when the plan "
         "can run, 2 when a camera or light pose lies outside the limits.",
     )
-    p.add_argument("--config", type=Path, required=True, help="rig config (TOML)")
-    p.add_argument("--plan", type=Path, required=True, help="sweep plan (TOML)")
+    from rig.cli_advise import add_advisor_options
+
+    p.add_argument("--config", type=Path, help="rig config (TOML)")
+    p.add_argument("--plan", type=Path, help="sweep plan (TOML); not with --advise")
+    p.add_argument(
+        "--advise",
+        type=Path,
+        metavar="PRECAPTURE",
+        help="suggest a capture density from the field of a quick sparse pre-capture of the "
+        "object (needs --env; with --config, the suggested plan is dry-run on that rig)",
+    )
+    p.add_argument("--env", type=Path, help="panorama the object will be relit in (--advise)")
+    add_advisor_options(p)
     p.set_defaults(handler=_run_plan)
 
 
@@ -108,10 +119,52 @@ def plan_report(plan: SweepPlan, config: RigConfig) -> tuple[list[str], bool]:
 def _run_plan(args: argparse.Namespace) -> int:
     from capture.plan import load_plan
     from rig.config import load_config
+    from rig.errors import InputError
 
+    if args.advise is not None:
+        return _advise_density(args)
+    if args.config is None or args.plan is None:
+        raise InputError("rig plan needs --config and --plan (or --advise PRECAPTURE --env P)")
     config = load_config(args.config)
     plan = load_plan(args.plan)
     print(f"plan {args.plan} on {config.name!r} ({args.config})")
     lines, runnable = plan_report(plan, config)
     print("\n".join(lines))
     return 0 if runnable else 2
+
+
+def _advise_density(args: argparse.Namespace) -> int:
+    """``rig plan --advise``: the density a pre-capture suggests, dry-run on a rig if given."""
+    from capture.plan import grid_plan
+    from processing.reflectance_field import ReflectanceField
+    from render.advisor import capture_density
+    from rig.cli_advise import run_advisor
+    from rig.config import load_config
+    from rig.errors import InputError
+
+    if args.env is None:
+        raise InputError("rig plan --advise needs --env PANORAMA (the lighting to relight in)")
+    if args.plan is not None:
+        raise InputError("rig plan --advise suggests a plan; leave out --plan")
+    advice = run_advisor(args.advise, args.env, args.tolerance, args.samples)
+    print(advice.format())
+    cameras, lights, _ = ReflectanceField.open(args.advise).shape
+    density = capture_density(advice, cameras, lights)
+    print(
+        f"suggested capture: {density.cameras} cameras x {density.lights} lights "
+        f"({density.cameras * density.lights} images per exposure) for {density.candidate.name}"
+    )
+    print(f"  because {density.reason}")
+    print(
+        '  plan (TOML):\n    [cameras]\n    layout = "grid"\n    count = '
+        f'{density.cameras}\n    [lights]\n    layout = "grid"\n    count = '
+        f"{density.lights}"
+    )
+    if args.config is not None:
+        config = load_config(args.config)
+        plan = grid_plan(density.cameras, density.lights, layout="grid")
+        lines, runnable = plan_report(plan, config)
+        print(f"on {config.name!r} ({args.config}):")
+        print("\n".join(lines))
+        return 0 if runnable else 2
+    return 0

@@ -16,6 +16,7 @@ The panorama arrives as an array: reading files is the caller's job (``processin
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numba
 import numpy as np
@@ -29,7 +30,12 @@ from sim.materials import specular_lobe
 from sim.scenes import SurfaceSamples
 from sim.synthetic_camera import DirectionalLight, SyntheticImage, image_of_points, light_visibility
 
-__all__ = ["environment_lights", "render_environment", "shade_environment"]
+__all__ = [
+    "environment_lights",
+    "render_environment",
+    "shade_environment",
+    "shade_environment_views",
+]
 
 #: Directions shaded together (bounds the memory of the visibility matrix).
 CHUNK = 64
@@ -85,14 +91,31 @@ def shade_environment(
     progress: bool = False,
 ) -> NDArray[np.float64]:
     """Radiance (P, 3) of every point toward ``viewpoint`` under directional lights (D, 3)."""
-    out = np.zeros((samples.count, 3))
+    return shade_environment_views(
+        samples, [viewpoint], directions, light, shadows=shadows, progress=progress
+    )[0]
+
+
+def shade_environment_views(
+    samples: SurfaceSamples,
+    viewpoints: Sequence[NDArray[np.floating]],
+    directions: NDArray[np.float64],
+    light: NDArray[np.float64],
+    *,
+    shadows: bool = True,
+    progress: bool = False,
+) -> list[NDArray[np.float64]]:
+    """:func:`shade_environment` toward several viewpoints, each light's shadow map made once.
+
+    Shadow maps depend on the light only and are most of the cost of a non-convex scene.
+    """
+    out = [np.zeros((samples.count, 3)) for _ in viewpoints]
     args = (
         samples.points.astype(np.float64),
         samples.normals.astype(np.float64),
         samples.rho_d.astype(np.float64),
         samples.f0.astype(np.float64),
         samples.alpha.astype(np.float64),
-        np.asarray(viewpoint, dtype=np.float64),
     )
     starts = range(0, len(directions), CHUNK)
     for start in tqdm(starts, desc="shading", unit="chunk", disable=not progress):
@@ -103,7 +126,9 @@ def shade_environment(
             )
         else:
             visible = np.ones((0, 0), dtype=np.bool_)
-        _shade(*args, directions[chunk], light[chunk], visible, shadows, out)
+        for viewpoint, radiance in zip(viewpoints, out, strict=True):
+            eye = np.asarray(viewpoint, dtype=np.float64)
+            _shade(*args, eye, directions[chunk], light[chunk], visible, shadows, radiance)
     return out
 
 

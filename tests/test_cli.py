@@ -186,3 +186,26 @@ def test_relight_warns_where_interpolation_fails(
     assert "warning (ghosting)" in capsys.readouterr().out
     assert main([*base, "--view", "30,150", "--scheme", "pixels"]) == 0  # from below
     assert "warning (view-outside)" in capsys.readouterr().out
+
+
+def test_relight_warns_of_a_sun_over_sparse_lights_and_of_grazing_views(
+    tmp_path: Path, small_field: Path, courtyard_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from processing.panorama import write_panorama
+    from sim.skies import procedural_sky
+
+    sky = tmp_path / "sky.exr"
+    write_panorama(sky, procedural_sky(64, sun_share=0.9))
+    base = ["relight", str(small_field), "--size", "48x48", "-o", str(tmp_path / "x.png")]
+    assert main([*base, "--env", str(courtyard_path), "--view", "30,50"]) == 0  # saves a fit
+    capsys.readouterr()
+    # 10 lights and a glossy lobe: the sun's highlight ghosts (tests/render/test_stability.py).
+    assert main([*base, "--env", str(sky), "--view", "30,50", "--scheme", "pixels"]) == 0
+    out = capsys.readouterr().out
+    assert "warning (sun-ghosting)" in out and "grazing" not in out
+    assert main([*base, "--env", str(courtyard_path), "--view", "30,86", "--scheme",
+                 "pixels"]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert "warning (grazing-view)" in out and "sun-ghosting" not in out
+    assert main([*base, "--env", str(sky), "--view", "30,50", "--scheme", "model"]) == 0
+    assert "sun-ghosting" not in capsys.readouterr().out  # the fitted lobe follows the sun

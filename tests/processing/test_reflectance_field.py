@@ -49,3 +49,17 @@ def test_camera_index_is_checked(store: Path) -> None:
     field = ReflectanceField.open(store)
     with pytest.raises(InputError, match=r"camera index 3 outside 0\.\.2"):
         field.camera_slab(3)
+
+
+def test_a_subset_holds_the_chosen_slabs_in_memory(tmp_path: Path) -> None:
+    path = tmp_path / "f.zarr"
+    simulate_field(path, "diffuse-sphere", lights=5, cameras=field_cameras(3, width=16,
+                   height=16), points=300)  # fmt: skip
+    field = ReflectanceField.open(path)
+    part = field.subset(cameras=np.array([2, 0]), lights=np.array([1, 4]), samples=np.arange(10))
+    assert part.shape == (2, 2, 10) and part.path != field.path
+    np.testing.assert_array_equal(part.camera_slab(0), field.camera_slab(2)[[1, 4], :10])
+    np.testing.assert_array_equal(part.visibility, field.visibility[[2, 0], :10])
+    assert part.cameras == [field.cameras[2], field.cameras[0]]
+    with pytest.raises(InputError, match=r"light indices must be in 0\.\.4"):
+        field.subset(lights=np.array([5]))

@@ -9,15 +9,24 @@ from processing.panorama import read_panorama
 from processing.reflectance_field import ReflectanceField
 from processing.sample_models import fit_sample_models
 from render.guards import (
+    SUN_SHARE,
     clipped_panorama_warning,
+    empty_camera_warning,
+    empty_cameras,
     fitted_lobe_alpha,
     ghosting_warning,
+    grazing_view_warning,
     lobe_width_deg,
+    sun_share,
+    sun_warning,
     view_warning,
 )
 from rig.camera_model import PinholeCamera
 from rig.directions import hemisphere_layout
+from rig.field_store import FieldStoreWriter
 from sim.field import field_cameras, simulate_field
+from sim.scenes import build_scene
+from sim.skies import ldr_photo, procedural_sky
 
 
 def test_lobe_width_of_ggx() -> None:
@@ -72,3 +81,48 @@ def test_an_ldr_panorama_is_flagged_and_an_hdr_one_is_not(courtyard_path: Path) 
     dim = np.full((64, 128, 3), 0.5, dtype=np.float32)  # low but not clipped: one peak pixel
     dim[0, 0] = 0.6
     assert clipped_panorama_warning(dim) is None
+
+
+def test_the_sun_share_of_a_sky_and_of_the_shared_panoramas(courtyard_path: Path) -> None:
+    assert sun_share(procedural_sky(64, sun_share=0.9)) == pytest.approx(0.9, abs=0.01)
+    assert sun_share(procedural_sky(64, sun_share=0.0)) < 0.05
+    assert sun_share(read_panorama(courtyard_path).rgb) < SUN_SHARE  # no sun in the courtyard
+    lights = hemisphere_layout(30)
+    assert sun_warning(procedural_sky(64, sun_share=0.0), lights, 0.2) is None
+
+
+def test_clipping_is_found_at_any_scale_but_not_in_a_synthetic_sky() -> None:
+    sky = procedural_sky(64, sun_share=0.9)
+    assert clipped_panorama_warning(sky) is None
+    assert clipped_panorama_warning(procedural_sky(64, sun_share=0.0)) is None  # a bright ring
+    assert clipped_panorama_warning(ldr_photo(sky) * np.float32(40.0)) is not None
+    assert clipped_panorama_warning(np.full((8, 16, 3), 3.0, dtype=np.float32)) is None  # uniform
+
+
+def test_grazing_views_are_those_near_the_horizon_below_every_camera() -> None:
+    directions = np.array([c.direction for c in field_cameras(12)])  # lowest ring at 67.5
+    for inclination, fires in ((50.0, False), (75.0, False), (85.0, True), (95.0, True),
+                               (120.0, False)):  # fmt: skip
+        warning = grazing_view_warning(directions, PinholeCamera(10.0, inclination))
+        assert (warning is not None) == fires
+
+
+def test_an_unwritten_camera_of_a_store_is_found(tmp_path: Path) -> None:
+    cameras = field_cameras(3, width=24, height=24)
+    complete = tmp_path / "complete.zarr"
+    simulate_field(complete, "diffuse-sphere", lights=4, cameras=cameras, points=300)
+    assert empty_cameras(ReflectanceField.open(complete)) == []
+    samples = build_scene("diffuse-sphere", 300)
+    store = FieldStoreWriter(tmp_path / "partial.zarr", points=samples.points,
+                             normals=samples.normals, light_directions=hemisphere_layout(4),
+                             cameras=cameras)  # fmt: skip
+    source = ReflectanceField.open(complete)
+    for s in (0, 2):  # processing stopped before camera 1's images
+        store.write_visibility(s, source.visibility[s])
+        for t in range(4):
+            store.write_slab(s, t, source.camera_slab(s)[t])
+    store.write_visibility(1, source.visibility[1])
+    partial = ReflectanceField.open(tmp_path / "partial.zarr")
+    assert empty_cameras(partial) == [1]
+    warning = empty_camera_warning(partial)
+    assert warning is not None and "rig process" in warning.message

@@ -1,0 +1,571 @@
+"""The cheapest relighting that is accurate enough: errors predicted from the field itself.
+
+A captured field has no ground truth, so every candidate configuration is scored by hold-out
+relighting on the field's own measurements. The environment is first gathered onto the measured
+lights (the panorama's Voronoi cells around them, :func:`projection_light_weights`): under that
+lighting the true relit value of sample p at measured camera s is a sum of measurements,
+``y[s, p] = sum_t W_t F[s, t, p]``, with nothing interpolated. Three error terms follow:
+
+- **lights**: the lights are split into ``FOLDS`` interleaved folds; each fold is held out,
+  predicted from the rest by the candidate's light predictor (its interpolation, or its model
+  refitted without the fold), and the held-out part of ``y`` compared. Errors add with their
+  sign, so a highlight that every neighbour misses in the same direction counts in full.
+- **views**: the same with folds of cameras, predicted by the candidate's view interpolation
+  (or its model refitted without them).
+- **lighting**: the candidate against the same predictor with exact lighting (every panorama
+  pixel; the 64-row grid for models), both on the field: the error of sampling K lights.
+
+Each term is a relative RMSE over the samples the cameras see; they are combined as independent
+errors, ``sqrt(lights^2 + views^2 + lighting^2)``. Held-out folds leave gaps wider than the
+field's spacing, so the lights and views terms lean high; the benchmark measures the predictions
+against the simulator's ground truth (``rig bench``, section "advisor").
+
+The work runs on a random subset of the samples (default 3 000): errors are averages over
+samples, and the fits and relightings are per sample. Speed is measured on that subset and the
+per-sample part scaled to the whole field.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from tqdm import tqdm
+
+from processing.interpolation import interpolation_weights
+from processing.panorama import Panorama
+from processing.reflectance_field import ReflectanceField
+from processing.sample_models import PARAMETRIC_MODELS, SampleModels, fit_sample_models
+from render.light_weights import LightWeights, projection_light_weights
+from render.model_relight import EnvironmentLights, ModelRelighter, ModelRelightSettings
+from render.relight import blend_cameras, relight
+from render.relight_mode import RelightEngine, RelightMode
+from render.relighter import Relighter, RelightSettings
+from rig.errors import InputError
+
+__all__ = [
+    "Advice",
+    "Advisor",
+    "Candidate",
+    "CaptureDensity",
+    "Prediction",
+    "advise",
+    "capture_density",
+    "default_candidates",
+]
+
+#: Interleaved hold-out folds of lights and of cameras.
+FOLDS = 4
+#: Samples the advisor works on (a random subset of those some camera sees).
+ADVISOR_SAMPLES = 3_000
+#: Measured cameras the lighting term and the timings look through.
+TIMING_VIEWS = 3
+#: Most light or camera positions a density suggestion goes to (a dense light stage: 400).
+MOST_POSITIONS = 2_000
+#: The exact lighting of the model candidates' lighting term (as ``MOST_ACCURATE_MODELS``).
+EXACT_GRID = 64
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One relighting configuration the advisor may choose.
+
+    Attributes
+    ----------
+    name : str, for people
+    mode : RelightSettings or ModelRelightSettings
+    """
+
+    name: str
+    mode: RelightMode
+
+    @property
+    def light_predictor(self) -> tuple[str, ...]:
+        """What predicts an unmeasured light: ("model", name) or ("interpolation", method, m)."""
+        if isinstance(self.mode, ModelRelightSettings):
+            return ("model", self.mode.model)
+        m = str(self.mode.m) if self.mode.interpolation == "paper" else ""
+        return ("interpolation", self.mode.interpolation, m)
+
+    @property
+    def view_predictor(self) -> tuple[str, ...]:
+        """What predicts an uncaptured view: ("model", name) or ("interpolation", method, n)."""
+        if isinstance(self.mode, ModelRelightSettings):
+            return ("model", self.mode.model)
+        n = str(self.mode.n) if self.mode.view_interpolation == "paper" else ""
+        return ("interpolation", self.mode.view_interpolation, n)
+
+    @property
+    def exact(self) -> RelightMode:
+        """The same predictors with exact lighting (the reference of the lighting term)."""
+        if isinstance(self.mode, ModelRelightSettings):
+            return replace(self.mode, lighting="grid", grid_height=EXACT_GRID)
+        return replace(self.mode, scheme="pixels", paper=False)
+
+
+def default_candidates(models: Sequence[str] = PARAMETRIC_MODELS) -> list[Candidate]:
+    """The configurations compared by default: the paper's, our linear schemes, the models.
+
+    Parameters
+    ----------
+    models : model names to offer (those fitted to the field)
+    """
+    out = [Candidate(f"paper, K={k}", RelightSettings.paper_configuration(k)) for k in (16, 64)]
+    out += [
+        Candidate(
+            f"sampled K={k}, barycentric",
+            RelightSettings(
+                scheme="sampled", k=k, interpolation="barycentric", view_interpolation="barycentric"
+            ),
+        )
+        for k in (16, 64, 256, 1024)
+    ]
+    out.append(
+        Candidate(
+            "every pixel (eq. 2), barycentric",
+            RelightSettings(
+                scheme="pixels", interpolation="barycentric", view_interpolation="barycentric"
+            ),
+        )
+    )
+    for name in models:
+        out += [
+            Candidate(f"{name}, sampled K={k}", ModelRelightSettings(model=name, k=k))
+            for k in (16, 64, 256)
+        ]
+        out += [
+            Candidate(f"{name}, grid {g}", ModelRelightSettings(model=name, lighting="grid",
+                                                                grid_height=g))
+            for g in (16, 32, 64)
+        ]  # fmt: skip
+    return out
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """A candidate's predicted error (relative RMSE over seen samples) and speed.
+
+    Attributes
+    ----------
+    candidate : Candidate
+    lights, views, lighting : float, the three error terms (``views`` 0 for pixel fields)
+    error : float, sqrt of the sum of their squares
+    lighting_ms : float, preparing a new lighting (sampling, weights), milliseconds
+    frame_ms : float, a new lighting at an unchanged view: ``lighting_ms`` plus relighting
+        the field's samples (measured on the subset, scaled to the field's sample count)
+    """
+
+    candidate: Candidate
+    lights: float
+    views: float
+    lighting: float
+    error: float
+    lighting_ms: float
+    frame_ms: float
+
+
+@dataclass(frozen=True)
+class Advice:
+    """The advisor's answer.
+
+    Attributes
+    ----------
+    choice : Prediction or None, the fastest candidate within the tolerance (None: none is)
+    predictions : list of Prediction, every candidate, in candidate order
+    tolerance : float, relative RMSE
+    samples : int, samples the predictions were made on (of ``field_samples``)
+    field_samples : int
+    """
+
+    choice: Prediction | None
+    predictions: list[Prediction]
+    tolerance: float
+    samples: int
+    field_samples: int
+
+    def format(self) -> str:
+        """A table of every candidate and a sentence on the choice, for people."""
+        lines = [
+            f"{'candidate':34s} {'lights':>7s} {'views':>7s} {'lighting':>8s} {'error':>7s} "
+            f"{'ms/frame':>9s}"
+        ]
+        for p in self.predictions:
+            mark = " <- chosen" if self.choice is not None and p is self.choice else ""
+            lines.append(
+                f"{p.candidate.name:34s} {p.lights:7.2%} {p.views:7.2%} {p.lighting:8.2%} "
+                f"{p.error:7.2%} {p.frame_ms:9.1f}{mark}"
+            )
+        if self.choice is None:
+            best = min(self.predictions, key=lambda p: p.error)
+            lines.append(
+                f"no configuration is predicted within {self.tolerance:.2%}; the most accurate is "
+                f"{best.candidate.name} ({best.error:.2%}): capture more lights or cameras"
+            )
+        else:
+            lines.append(
+                f"choice: {self.choice.candidate.name}, predicted error {self.choice.error:.2%} "
+                f"(tolerance {self.tolerance:.2%}), {self.choice.frame_ms:.1f} ms per new "
+                f"lighting at {self.field_samples} samples"
+            )
+        lines.append(
+            f"(predicted by holding out measured lights and cameras, on {self.samples} of "
+            f"{self.field_samples} samples)"
+        )
+        return "\n".join(lines)
+
+
+def _folds(count: int) -> list[NDArray[np.int64]]:
+    """Interleaved folds of ``count`` indices (each spread over the whole layout)."""
+    folds = min(FOLDS, count)
+    return [np.arange(f, count, folds, dtype=np.int64) for f in range(folds)]
+
+
+class _Accumulator:
+    """Sums of squared errors and of squared true values, per error term."""
+
+    def __init__(self) -> None:
+        self.error: dict[tuple[str, ...], float] = {}
+        self.energy: dict[tuple[str, ...], float] = {}
+
+    def add(self, key: tuple[str, ...], predicted: NDArray[np.floating],
+            truth: NDArray[np.floating], mask: NDArray[np.bool_]) -> None:  # fmt: skip
+        difference = np.asarray(predicted, np.float64)[mask] - np.asarray(truth, np.float64)[mask]
+        self.error[key] = self.error.get(key, 0.0) + float(np.sum(difference**2))
+        self.energy[key] = self.energy.get(key, 0.0) + float(np.sum(np.square(truth[mask])))
+
+    def relative(self, key: tuple[str, ...]) -> float:
+        energy = self.energy.get(key, 0.0)
+        return math.sqrt(self.error[key] / energy) if energy > 0 else 0.0
+
+
+def _timed_radiance(
+    engine: RelightEngine,
+    field: ReflectanceField,
+    panorama: Panorama,
+    cameras: Sequence[int],
+    *,
+    timed: bool = True,
+) -> tuple[list[tuple[NDArray[np.float32], NDArray[np.bool_]]], float, float]:
+    """Relit samples at ``cameras``, and the ms of preparing a lighting and of relighting.
+
+    Times are of a new lighting at an unchanged view (the interactive loop), the fastest over
+    the cameras (the least disturbed by other work on the machine); 0 when not ``timed``.
+    """
+    out, prepare, render = [], [], []
+    engine.set_lighting(panorama)
+    for s in cameras:
+        engine.set_view(field.cameras[s])
+        image = engine.render()
+        if timed:
+            engine.render()  # the first renders after a view change build the view's caches
+            prepare.append(engine.set_lighting(panorama))
+            image = engine.render()
+            render.append(image.seconds["relight"])
+        out.append((image.radiance, image.needed & field.visibility[s]))
+    if not timed:
+        return out, 0.0, 0.0
+    return out, 1e3 * min(prepare), 1e3 * min(render)
+
+
+@dataclass
+class _Fold:
+    """One hold-out fold: what is kept, what is held out, and the models fitted without it."""
+
+    kept: NDArray[np.int64]
+    held: NDArray[np.int64]
+    part: ReflectanceField
+    engines: dict[str, ModelRelighter]
+
+
+class Advisor:
+    """Predicts the error and speed of relighting configurations on one field.
+
+    The sample subset, the hold-out folds and their model fits do not depend on the lighting,
+    so they are made once (on first use) and every :meth:`predict` reuses them.
+
+    Parameters
+    ----------
+    field : ReflectanceField
+    candidates : the configurations to compare (default :func:`default_candidates` of the
+        models a field of its kind can fit)
+    samples : int, samples to work on (point fields; pixel fields use all)
+    seed : int, of the sample subset
+    progress : bool, progress bars
+    """
+
+    def __init__(
+        self,
+        field: ReflectanceField,
+        candidates: Sequence[Candidate] | None = None,
+        *,
+        samples: int = ADVISOR_SAMPLES,
+        seed: int = 0,
+        progress: bool = False,
+    ) -> None:
+        s_count, t_count, p_count = field.shape
+        if t_count < 2 * FOLDS:
+            raise InputError(
+                f"{field.path}: predicting errors holds out lights in {FOLDS} folds; the field "
+                f"has {t_count} lights (at least {2 * FOLDS} needed)"
+            )
+        if candidates is None:
+            names = (
+                PARAMETRIC_MODELS
+                if field.sample_kind == "points"
+                else (*PARAMETRIC_MODELS, "hsh2", "hsh3")
+            )
+            candidates = default_candidates(names)  # fmt: skip
+        if not candidates:
+            raise InputError("no candidate configurations to compare")
+        self.candidates = list(candidates)
+        self.field_samples = p_count
+        self.progress = progress
+        keep: NDArray[np.int64] | None = None
+        if field.sample_kind == "points" and p_count > samples:
+            seen = np.flatnonzero(field.visibility.any(axis=0))
+            chosen = np.random.default_rng(seed).choice(seen, min(samples, len(seen)), False)
+            keep = np.sort(chosen)
+        self.part = field.subset(samples=keep)
+        models = [c.mode.model for c in self.candidates if isinstance(c.mode, ModelRelightSettings)]
+        self._model_names = list(dict.fromkeys(models))
+        self._models: SampleModels | None = None
+        self.views_tested = field.sample_kind == "points" and s_count >= FOLDS
+        self._light_folds: list[_Fold] | None = None
+        self._camera_folds: list[_Fold] | None = None
+        self._shared: dict[str, ModelRelighter] = {}
+
+    def _fold(self, held: NDArray[np.int64], count: int, axis: str) -> _Fold:
+        kept = np.setdiff1d(np.arange(count), held)
+        part = self.part.subset(**{axis: kept})
+        engines: dict[str, ModelRelighter] = {}
+        if self._model_names:
+            fitted = fit_sample_models(part, self._model_names)
+            engines = {
+                name: ModelRelighter(part, ModelRelightSettings(model=name), fitted)
+                for name in self._model_names
+            }
+        return _Fold(kept, held, part, engines)
+
+    def _folds(self) -> tuple[list[_Fold], list[_Fold]]:
+        if self._light_folds is None or self._camera_folds is None:
+            s_count, t_count, _ = self.part.shape
+            light_held = _folds(t_count)
+            camera_held = _folds(s_count) if self.views_tested else []
+            steps = tqdm(total=len(light_held) + len(camera_held), desc="hold-out fits",
+                         unit="fold", disable=not self.progress)  # fmt: skip
+            self._light_folds, self._camera_folds = [], []
+            for held in light_held:
+                self._light_folds.append(self._fold(held, t_count, "lights"))
+                steps.update()
+            for held in camera_held:
+                self._camera_folds.append(self._fold(held, s_count, "cameras"))
+                steps.update()
+            steps.close()
+        return self._light_folds, self._camera_folds
+
+    def hold_out_errors(
+        self, weights: NDArray[np.floating]
+    ) -> tuple[dict[tuple[str, ...], float], dict[tuple[str, ...], float]]:
+        """The lights and views terms of every predictor the candidates use.
+
+        Parameters
+        ----------
+        weights : ndarray, shape (T, 3), light carried by each measured light (radiance x sr)
+
+        Returns
+        -------
+        lights, views : dict of predictor (``Candidate.light_predictor`` /
+            ``Candidate.view_predictor``) to relative RMSE; ``views`` is empty for pixel fields
+            and fields of fewer than 4 cameras
+        """
+        field = self.part
+        w = np.asarray(weights, dtype=np.float64)
+        light_keys = list(dict.fromkeys(c.light_predictor for c in self.candidates))
+        view_keys = list(dict.fromkeys(c.view_predictor for c in self.candidates))
+        light_folds, camera_folds = self._folds()
+        lights_acc, views_acc = _Accumulator(), _Accumulator()
+        # Lights: predict each fold's measured values at every camera.
+        for fold in light_folds:
+            kept, held = fold.kept, fold.held
+            for engine in fold.engines.values():
+                engine.set_lights(EnvironmentLights(field.light_directions[held], w[held]))
+            for s in range(field.shape[0]):
+                slab = field.camera_slab(s).astype(np.float64)
+                truth = np.einsum("tc,tpc->pc", w[held], slab[held])
+                seen = field.visibility[s]
+                for key in light_keys:
+                    if key[0] == "model":
+                        fold.engines[key[1]].set_view(field.cameras[s])
+                        image = fold.engines[key[1]].render()
+                        lights_acc.add(key, image.radiance, truth, seen & image.needed)
+                        continue
+                    m = int(key[2]) if key[2] else 3
+                    a = interpolation_weights(
+                        field.light_directions[kept], field.light_directions[held], key[1], m=m
+                    ).dense(len(kept))
+                    coefficients = a.T @ w[held]  # light each kept light carries for the fold
+                    predicted = np.einsum("jc,jpc->pc", coefficients, slab[kept])
+                    lights_acc.add(key, predicted, truth, seen)
+        # Views: predict each fold's cameras from the others under the gathered lighting.
+        gathered = LightWeights(w[None].astype(np.float32), None, 0.0, "projection")
+        for fold in camera_folds:
+            for engine in fold.engines.values():
+                engine.set_lights(EnvironmentLights(field.light_directions.copy(), w))
+            for s in fold.held:
+                slab = field.camera_slab(int(s)).astype(np.float64)
+                truth = np.einsum("tc,tpc->pc", w, slab)
+                seen = field.visibility[s]
+                for key in view_keys:
+                    if key[0] == "model":
+                        fold.engines[key[1]].set_view(field.cameras[int(s)])
+                        image = fold.engines[key[1]].render()
+                        views_acc.add(key, image.radiance, truth, seen & image.needed)
+                        continue
+                    n = int(key[2]) if key[2] else 3
+                    camera = field.cameras[int(s)]
+                    blend = blend_cameras(fold.part, camera, key[1], n=n, needed=seen)
+                    predicted = relight(fold.part, gathered, blend)
+                    views_acc.add(key, predicted, truth, seen & ~blend.holes)
+        return (
+            {key: lights_acc.relative(key) for key in light_keys},
+            {key: views_acc.relative(key) for key in view_keys} if self.views_tested else {},
+        )
+
+    def _engine(self, mode: RelightMode) -> RelightEngine:
+        if not isinstance(mode, ModelRelightSettings):
+            return Relighter(self.part, mode)
+        if self._models is None:
+            self._models = fit_sample_models(self.part, self._model_names)
+        if mode.model not in self._shared:  # choosing shadow marks once per model
+            self._shared[mode.model] = ModelRelighter(self.part, mode, self._models)
+        return self._shared[mode.model].with_lighting(mode)
+
+    def predict(self, panorama: Panorama) -> list[Prediction]:
+        """Every candidate's predicted error and speed under ``panorama``, in candidate order."""
+        part = self.part
+        s_count = part.shape[0]
+        weights = projection_light_weights(panorama.rgb, part.light_directions).rgb[0]
+        lights, views = self.hold_out_errors(weights)
+        cameras = sorted({round(float(i)) for i in np.linspace(0, s_count - 1, TIMING_VIEWS)})
+        reference: dict[str, list[tuple[NDArray[np.float32], NDArray[np.bool_]]]] = {}
+        predictions = []
+        for candidate in tqdm(self.candidates, desc="candidates", disable=not self.progress):
+            relit, prepare_ms, render_ms = _timed_radiance(
+                self._engine(candidate.mode), part, panorama, cameras
+            )
+            key = repr(candidate.exact)
+            if key not in reference:
+                reference[key] = (
+                    relit
+                    if candidate.exact == candidate.mode
+                    else _timed_radiance(self._engine(candidate.exact), part, panorama, cameras)[0]
+                )
+            acc = _Accumulator()
+            for (value, mask), (exact, exact_mask) in zip(relit, reference[key], strict=True):
+                acc.add(("lighting",), value, exact, mask & exact_mask)
+            terms = (
+                lights[candidate.light_predictor],
+                views.get(candidate.view_predictor, 0.0),
+                acc.relative(("lighting",)),
+            )
+            predictions.append(
+                Prediction(
+                    candidate,
+                    *terms,
+                    error=math.sqrt(sum(t * t for t in terms)),
+                    lighting_ms=prepare_ms,
+                    frame_ms=prepare_ms + render_ms * self.field_samples / part.shape[2],
+                )
+            )
+        return predictions
+
+    def advise(self, panorama: Panorama, tolerance: float = 0.02) -> Advice:
+        """The fastest candidate (predicted time per new lighting) predicted within
+        ``tolerance`` (relative RMSE in (0, 1)) under ``panorama``."""
+        if not 0.0 < tolerance < 1.0:
+            raise InputError(f"tolerance must be a relative error in (0, 1), got {tolerance}")
+        predictions = self.predict(panorama)
+        within = [p for p in predictions if p.error <= tolerance]
+        choice = min(within, key=lambda p: (p.frame_ms, p.error)) if within else None
+        return Advice(choice, predictions, tolerance, self.part.shape[2], self.field_samples)
+
+
+def advise(
+    field: ReflectanceField,
+    panorama: Panorama,
+    tolerance: float = 0.02,
+    *,
+    candidates: Sequence[Candidate] | None = None,
+    samples: int = ADVISOR_SAMPLES,
+    seed: int = 0,
+    progress: bool = False,
+) -> Advice:
+    """The cheapest configuration predicted within ``tolerance`` on ``field`` under ``panorama``.
+
+    See :class:`Advisor` (parameters) and the module docstring (how errors are predicted).
+    """
+    advisor = Advisor(field, candidates, samples=samples, seed=seed, progress=progress)
+    return advisor.advise(panorama, tolerance)
+
+
+@dataclass(frozen=True)
+class CaptureDensity:
+    """A capture density suggested from a sparse pre-capture.
+
+    Attributes
+    ----------
+    cameras, lights : int, suggested position counts
+    candidate : Candidate, the relighting the density is for
+    predicted : Prediction, that candidate's prediction on the pre-capture
+    reason : str, for people
+    """
+
+    cameras: int
+    lights: int
+    candidate: Candidate
+    predicted: Prediction
+    reason: str
+
+
+def capture_density(advice: Advice, cameras: int, lights: int) -> CaptureDensity:
+    """The fewest images (cameras x lights) predicted to relight within the tolerance.
+
+    Interpolation error falls with the square of the spacing, and the spacing of N positions
+    on the hemisphere with 1 / sqrt(N), so a held-out error e at N positions is taken to
+    become e N / N' at N'. The error budget left after the lighting term is split evenly
+    between lights and views. Models limited by what they cannot represent (shadows a
+    light grid resolves only so far) fall more slowly: the suggestion is then a lower bound,
+    and a second pre-capture at the suggested density checks it.
+
+    Parameters
+    ----------
+    advice : Advice of the pre-capture
+    cameras, lights : int, the pre-capture's counts
+    """
+    best: tuple[int, float, CaptureDensity] | None = None
+    for p in advice.predictions:
+        left = advice.tolerance**2 - p.lighting**2
+        if left <= 0:
+            continue  # the lighting alone exceeds the tolerance at any density
+        target = math.sqrt(left / 2.0)
+        needed_t = lights if p.lights <= target else math.ceil(lights * p.lights / target)
+        needed_s = cameras if p.views <= target else math.ceil(cameras * p.views / target)
+        if max(needed_t, needed_s) > MOST_POSITIONS:
+            continue
+        images = needed_t * needed_s
+        reason = (
+            f"{p.candidate.name}: held-out error {p.lights:.2%} over lights and {p.views:.2%} "
+            f"over views at {cameras} x {lights}; each must fall to {target:.2%}"
+        )
+        density = CaptureDensity(needed_s, needed_t, p.candidate, p, reason)
+        if best is None or (images, p.frame_ms) < best[:2]:
+            best = (images, p.frame_ms, density)
+    if best is None:
+        raise InputError(
+            f"no configuration reaches {advice.tolerance:.2%} within {MOST_POSITIONS} light and "
+            f"camera positions; relax the tolerance"
+        )
+    return best[2]
