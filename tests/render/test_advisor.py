@@ -52,7 +52,7 @@ def advisor(glossy: ReflectanceField) -> Advisor:
 
 @pytest.fixture(scope="module")
 def advice(advisor: Advisor, courtyard: Panorama) -> Advice:
-    return advisor.advise(courtyard, 0.05)
+    return advisor.advise(courtyard, 0.08)
 
 
 def _true_error(field: ReflectanceField, mode: object, panorama: Panorama) -> float:
