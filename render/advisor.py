@@ -116,6 +116,8 @@ def default_candidates(models: Sequence[str] = PARAMETRIC_MODELS) -> list[Candid
     models : model names to offer (those fitted to the field)
     """
     out = [Candidate(f"paper, K={k}", RelightSettings.paper_configuration(k)) for k in (16, 64)]
+    wide = replace(RelightSettings.paper_configuration(64), m=6, n=6)
+    out.append(Candidate("paper, K=64, cosine 6 x 6", wide))
     out += [
         Candidate(
             f"sampled K={k}, barycentric",
@@ -125,6 +127,15 @@ def default_candidates(models: Sequence[str] = PARAMETRIC_MODELS) -> list[Candid
         )
         for k in (16, 64, 256, 1024)
     ]
+    out.append(
+        Candidate(
+            "median cut K=64, barycentric",
+            RelightSettings(
+                scheme="sampled", k=64, sampler="median-cut", interpolation="barycentric",
+                view_interpolation="barycentric",
+            ),
+        )
+    )  # fmt: skip
     out.append(
         Candidate(
             "every pixel (eq. 2), barycentric",

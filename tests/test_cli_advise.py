@@ -27,7 +27,7 @@ def test_advise_prints_and_saves_the_choice(
     out = capsys.readouterr().out
     assert "choice: lambert+ggx" in out and "predicted by holding out" in out
     advice = json.loads(saved.read_text())
-    assert advice["choice"].startswith("lambert+ggx") and len(advice["predictions"]) == 19
+    assert advice["choice"].startswith("lambert+ggx") and len(advice["predictions"]) == 21
 
 
 def test_plan_advise_suggests_a_density(
