@@ -185,6 +185,9 @@ class SuiteConfig:
     repeats : timed frames per figure (after a warm-up frame)
     capture : (cameras, lights, image side) of the capture-overhead sweep, or None to skip
     loop : bool, whether to measure the product's interactive loop
+    loop_field : (field, dtype) of the interactive loop (glossy sphere), or None for the chain
+        field: a large field, so the loop's per-sample work is measured against the memory
+        bandwidth it must stream
     sky_height : rows of the procedural sky
     advisor_fields, advisor_scenes, advisor_environments : where ``rig advise`` is validated
         (fields among the chain and density fields; HDR environments among ``environments``)
@@ -203,6 +206,7 @@ class SuiteConfig:
     repeats: int
     capture: tuple[int, int, int] | None
     loop: bool = True
+    loop_field: tuple[FieldSpec, str] | None = None
     sky_height: int = 256
     advisor_fields: tuple[FieldSpec, ...] = ()
     advisor_scenes: tuple[str, ...] = SCENES
@@ -239,6 +243,7 @@ FULL = SuiteConfig(
     k_families=K_FAMILIES,
     repeats=3,
     capture=(4, 6, 64),
+    loop_field=((30, 30, 250_000, 512), "float16"),
     advisor_fields=((10, 10, 20_000, 128), (20, 20, 20_000, 128), (30, 30, 20_000, 128)),
 )
 
@@ -548,7 +553,9 @@ def machine() -> dict[str, Any]:
     }
 
 
-def bench_product(config: SuiteConfig, chain: _FieldRun | None, repeats: int) -> dict[str, Any]:
+def bench_product(
+    config: SuiteConfig, chain: _FieldRun | None, repeats: int, fields_dir: Path
+) -> dict[str, Any]:
     """The whole product's speed in one run: capture, field building, interactive loop."""
     out: dict[str, Any] = {}
     if config.capture is not None:
@@ -566,6 +573,14 @@ def bench_product(config: SuiteConfig, chain: _FieldRun | None, repeats: int) ->
         )
     if config.loop and chain is not None:
         bandwidth = copy_bandwidth()
+        if config.loop_field is not None:
+            (cameras, lights, points, size), dtype = config.loop_field
+            path = field_path(fields_dir.parent, "glossy-sphere", cameras, lights, points, size,
+                              dtype)  # fmt: skip
+            field = ReflectanceField.open(path)
+            models = models_for_field(field, progress=True)
+            spec = (cameras, lights, points, size)
+            chain = _FieldRun("glossy-sphere", spec, field, models, {}, _views(field), {})
         camera = chain.views["captured"]
         modes: dict[str, RelightMode] = {
             "paper": RelightSettings.paper_configuration(CHAIN_K),
@@ -573,6 +588,7 @@ def bench_product(config: SuiteConfig, chain: _FieldRun | None, repeats: int) ->
                 chain.field, chain.models
             ).mode,
             "sampled, barycentric": k_method("sampled, barycentric", CHAIN_K).mode,
+            "models, sampled K=64": k_method("models, sampled", CHAIN_K).mode,
         }
         loops = []
         for name, mode in modes.items():
@@ -581,12 +597,18 @@ def bench_product(config: SuiteConfig, chain: _FieldRun | None, repeats: int) ->
             # Two frames at the last view: the second builds the view's blended field.
             engine.render()
             engine.render()
+            compute = []
+            for yaw in np.linspace(0.0, 90.0, repeats):
+                engine.set_lighting(read_panorama(PANORAMAS / "courtyard.exr"), yaw_deg=yaw)
+                compute.append(1e3 * engine.render().seconds["relight"])
             row: dict[str, Any] = {"mode": name, "settings": _mode_dict(mode)} | loop
+            row["relight_compute_ms"] = float(np.median(compute))
             row["frame_budget_ratio"] = loop["loop_new_lighting_ms"] / FRAME_BUDGET_MS
             if isinstance(engine, Relighter) and engine._view_field is not None:
                 # The memory-bandwidth floor: one read of the view's blended field.
                 floor = 1e3 * engine._view_field.radiance.nbytes / bandwidth
-                row["bandwidth_floor_ratio"] = loop["loop_new_lighting_ms"] / floor
+                row["bandwidth_floor_ms"] = floor
+                row["bandwidth_floor_ratio"] = row["relight_compute_ms"] / floor
             loops.append(row)
             print(
                 f"loop      {name:40s} new lighting {loop['loop_new_lighting_ms']:.1f} ms "
@@ -673,7 +695,7 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
                     {name: envs[name].panorama for name in config.advisor_environments},
                     samples=config.advisor_samples,
                 )  # fmt: skip
-    results["product"] = bench_product(config, chain_run, config.repeats)
+    results["product"] = bench_product(config, chain_run, config.repeats, fields_dir)
     results["stability"] = run_stability(out / "stability", config.quick_methods)
     results["machine"]["load_average_end"] = list(os.getloadavg())
     results["machine"]["peak_rss_MB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
