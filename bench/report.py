@@ -167,19 +167,30 @@ def _chart_pareto(results: dict[str, Any], path: Path) -> list[str]:
     points = _pareto_points(results)
     front = pareto_front(points)
     figure, axis = plt.subplots(figsize=(8, 5))
-    chain = set(results["chain"])
+    chain = {
+        r["label"] for r in results["rows"] if r["study"] == "ablation" and r["role"] == "chain"
+    }
+    below = False
     for label, (ms, error) in points.items():
-        marker = "o" if label in chain else "."
-        axis.scatter([ms], [100 * error], s=30 if label in chain else 14, marker=marker)
-        axis.annotate(
-            label, (ms, 100 * error), fontsize=6, xytext=(3, 2), textcoords="offset points"
-        )
+        # Steps of the chain in colour and named; the K sweep and the branches as grey dots,
+        # named only where they make the front (the rest would bury the chart in labels).
+        if label in chain:
+            axis.scatter([ms], [100 * error], s=36, marker="o", zorder=3)
+        else:
+            axis.scatter([ms], [100 * error], s=12, marker=".", color="0.55", zorder=2)
+        if label in chain or label in front:
+            below = not below  # alternate sides: neighbouring steps often sit close
+            axis.annotate(
+                label, (ms, 100 * error), fontsize=7, xytext=(4, -9 if below else 3),
+                textcoords="offset points",
+            )  # fmt: skip
     xs = [points[label][0] for label in front]
     ys = [100 * points[label][1] for label in front]
     axis.step(xs, ys, where="post", color="black", linewidth=1, label="Pareto front")
     axis.set_xscale("log")
+    axis.set_yscale("log")
     axis.set_xlabel("time per new lighting (set_lighting + render), ms, log scale")
-    axis.set_ylabel("relative RMSE, % (mean of scenes, HDR panoramas, both views)")
+    axis.set_ylabel("relative RMSE, % (log; mean of scenes, HDR panoramas, views)")
     cameras, lights, points_count, size = results["chain_field"]
     axis.set_title(
         f"Error against time, S={cameras} T={lights}, {points_count} points, {size} px views"
@@ -503,7 +514,11 @@ def _section_density(results: dict[str, Any]) -> list[str]:
             readings.append(
                 f"{label}: {_pct(errors[sparse])} at {_field_name(sparse)} to "
                 f"{_pct(errors[dense])} at {_field_name(dense)} "
-                f"({_ratio(errors[sparse], errors[dense])} less error on the denser field)"
+                + (
+                    f"({_ratio(errors[sparse], errors[dense])} less error on the denser field)"
+                    if errors[dense] <= errors[sparse]
+                    else f"({_ratio(errors[dense], errors[sparse])} more error on the denser field)"
+                )
             )
     lines += _table(["method", *(_field_name(f) for f in fields)], table)
     lines += ["![error against field density](error_vs_density.png)", ""]

@@ -6,7 +6,9 @@ lights (the panorama's Voronoi cells around them, :func:`projection_light_weight
 lighting the true relit value of sample p at measured camera s is a sum of measurements,
 ``y[s, p] = sum_t W_t F[s, t, p]``, with nothing interpolated. Three error terms follow:
 
-- **lights**: the lights are split into ``FOLDS`` interleaved folds; each fold is held out,
+- **lights**: the lights are split into up to ``MOST_FOLDS`` interleaved folds (one light each
+  on a field of as few lights, so a sparse field loses little when one is held out); each fold
+  is held out,
   predicted from the rest by the candidate's light predictor (its interpolation, or its model
   refitted without the fold), and the held-out part of ``y`` compared. Errors add with their
   sign, so a highlight that every neighbour misses in the same direction counts in full.
@@ -58,8 +60,10 @@ __all__ = [
     "default_candidates",
 ]
 
-#: Interleaved hold-out folds of lights and of cameras.
-FOLDS = 4
+#: Most interleaved hold-out folds of lights and of cameras (fewer positions: one fold each).
+MOST_FOLDS = 12
+#: Fewest lights the hold-out works with, and fewest cameras for the views term.
+FEWEST_LIGHTS, FEWEST_CAMERAS = 8, 4
 #: Samples the advisor works on (a random subset of those some camera sees).
 ADVISOR_SAMPLES = 3_000
 #: Measured cameras the lighting term looks through (it keeps the worst), and the timings.
@@ -232,7 +236,7 @@ class Advice:
 
 def _folds(count: int) -> list[NDArray[np.int64]]:
     """Interleaved folds of ``count`` indices (each spread over the whole layout)."""
-    folds = min(FOLDS, count)
+    folds = min(MOST_FOLDS, count)
     return [np.arange(f, count, folds, dtype=np.int64) for f in range(folds)]
 
 
@@ -319,10 +323,10 @@ class Advisor:
         progress: bool = False,
     ) -> None:
         s_count, t_count, p_count = field.shape
-        if t_count < 2 * FOLDS:
+        if t_count < FEWEST_LIGHTS:
             raise InputError(
-                f"{field.path}: predicting errors holds out lights in {FOLDS} folds; the field "
-                f"has {t_count} lights (at least {2 * FOLDS} needed)"
+                f"{field.path}: predicting errors holds out measured lights; the field has "
+                f"{t_count} lights (at least {FEWEST_LIGHTS} needed)"
             )
         if candidates is None:
             names = (
@@ -345,7 +349,7 @@ class Advisor:
         models = [c.mode.model for c in self.candidates if isinstance(c.mode, ModelRelightSettings)]
         self._model_names = list(dict.fromkeys(models))
         self._models: SampleModels | None = None
-        self.views_tested = field.sample_kind == "points" and s_count >= FOLDS
+        self.views_tested = field.sample_kind == "points" and s_count >= FEWEST_CAMERAS
         self._light_folds: list[_Fold] | None = None
         self._camera_folds: list[_Fold] | None = None
         self._shared: dict[str, ModelRelighter] = {}
@@ -392,7 +396,7 @@ class Advisor:
         -------
         lights, views : dict of predictor (``Candidate.light_predictor`` /
             ``Candidate.view_predictor``) to relative RMSE; ``views`` is empty for pixel fields
-            and fields of fewer than 4 cameras
+            and fields of fewer than ``FEWEST_CAMERAS`` cameras
         """
         field = self.part
         w = np.asarray(weights, dtype=np.float64)

@@ -16,8 +16,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from rig.errors import RigError
+
 if TYPE_CHECKING:
     from processing.panorama import Panorama
+    from render.relighter import RelitImage
+    from sim.synthetic_camera import SyntheticImage
 
 __all__ = ["capture_demo"]
 
@@ -77,7 +81,55 @@ def capture_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
     skipped = [(c, t) for c, t, _ in plan.skipped(config)]
     lines += _agreement(root, field_path, cameras, lights, points, size, skipped)
     lines += _relight_captured(out, field_path, panorama, quick)
+    lines += _advise_captured(field_path, panorama, quick, cameras, lights)
     return [*lines, ""]
+
+
+def _advise_captured(
+    field_path: Path, panorama: Panorama, quick: bool, cameras: int, lights: int
+) -> list[str]:
+    """``rig advise`` and ``rig plan --advise`` on the captured field, with the choice's true
+    error at a view between the captured cameras."""
+    from processing.reflectance_field import ReflectanceField
+    from processing.sample_model_store import models_for_field
+    from render.advisor import Advisor, capture_density
+    from render.relight_mode import open_relighter
+    from sim.ground_truth import render_environment
+    from sim.scenes import build_scene
+
+    field = ReflectanceField.open(field_path)
+    tolerance = 0.05
+    try:
+        advice = Advisor(field, samples=800 if quick else 2000).advise(panorama, tolerance)
+    except RigError as error:  # the quick demo's 5 lights are too few to hold out
+        return ["", f"`rig advise` on the captured field: {error}"]
+    lines = ["", f"`rig advise` on the captured field (tolerance {tolerance:.0%}):", "", "```"]
+    lines += [advice.format(), "```", ""]
+    if advice.choice is not None:
+        size = 96 if quick else 256
+        middle = field.cameras[len(field.cameras) // 2]
+        camera = replace(middle, azimuth_deg=(middle.azimuth_deg + 20.0) % 360.0, width=size,
+                         height=size)  # fmt: skip
+        samples = build_scene(DEMO_SCENE, field.shape[2])
+        truth = render_environment(samples, panorama.rgb, camera, grid_height=64)
+        engine = open_relighter(field, advice.choice.candidate.mode, models_for_field(field))
+        engine.set_lighting(panorama)
+        engine.set_view(camera)
+        relit_error = _image_error(engine.render(), truth)
+        lines.append(
+            f"The choice relit at a view between the captured cameras: {relit_error:.2%} against "
+            f"the ground truth (image; predicted {advice.choice.error:.2%} over the samples)."
+        )
+    try:
+        density = capture_density(advice, cameras, lights)
+    except RigError as error:
+        lines.append(f"`rig plan --advise`: {error}")
+    else:
+        lines.append(
+            f"`rig plan --advise`: {density.cameras} cameras x {density.lights} lights for "
+            f"{density.candidate.name} ({density.reason})."
+        )
+    return lines
 
 
 def _agreement(
@@ -164,10 +216,7 @@ def _relight_captured(out: Path, field_path: Path, panorama: Panorama, quick: bo
             engine.set_lighting(panorama)
             engine.set_view(camera)
             image = engine.render()
-            mask = image.coverage & truth.coverage
-            error = np.sqrt(
-                np.mean((image.rgb[mask] - truth.rgb[mask]) ** 2) / np.mean(truth.rgb[mask] ** 2)
-            )
+            error = _image_error(image, truth)
             picture = display_picture(image.rgb, image.coverage, exposure)
             write_png(out / "capture" / "relit" / f"{view_name}-{name}.png", picture)
             row.append(_labelled(picture, f"{name} {error:.1%}"))
@@ -177,6 +226,14 @@ def _relight_captured(out: Path, field_path: Path, panorama: Panorama, quick: bo
     sheet = np.concatenate(tiles, axis=0)
     write_png(out / "capture" / "contact-sheet.png", sheet)
     return [*lines, "", "Contact sheet: [capture/contact-sheet.png](capture/contact-sheet.png)"]
+
+
+def _image_error(image: RelitImage, truth: SyntheticImage) -> float:
+    """Relative RMSE of a relit image against the ground truth over the pixels both cover."""
+    mask = image.coverage & truth.coverage
+    return float(
+        np.sqrt(np.mean((image.rgb[mask] - truth.rgb[mask]) ** 2) / np.mean(truth.rgb[mask] ** 2))
+    )
 
 
 def _labelled(picture: NDArray[np.uint8], text: str) -> NDArray[np.uint8]:
