@@ -82,9 +82,17 @@ def _field(out: Path, scene: str, cameras: int, lights: int, sizes: Sizes) -> Re
 
 
 def in_memory(field: ReflectanceField, radiance: NDArray[np.floating]) -> ReflectanceField:
-    """A copy of ``field`` held in memory with other radiance (S, T, P, 3): a changed capture."""
-    copy = field.subset()
-    return replace(copy, radiance=np.asarray(radiance, dtype=np.float32), _slabs=OrderedDict())
+    """A copy of ``field`` held in memory with other radiance (S, T, P, 3): a changed capture.
+
+    Its path is its own, as a subset's is: nothing saved beside the store belongs to it.
+    """
+    return replace(
+        field,
+        path=field.path.with_name(field.path.name + "[changed]"),
+        radiance=np.asarray(radiance, dtype=np.float32),
+        cached_slabs=field.shape[0],
+        _slabs=OrderedDict(),
+    )
 
 
 def sensor_field(field: ReflectanceField, level: float, seed: int = 0) -> ReflectanceField:

@@ -591,15 +591,16 @@ def bench_product(
             "models, sampled K=64": k_method("models, sampled", CHAIN_K).mode,
         }
         loops = []
+        courtyard = read_panorama(PANORAMAS / "courtyard.exr")
         for name, mode in modes.items():
             engine: RelightEngine = open_relighter(chain.field, mode, chain.models)
-            loop = loop_ms(engine, read_panorama(PANORAMAS / "courtyard.exr"), repeats, camera)
+            loop = loop_ms(engine, courtyard, repeats, camera)
             # Two frames at the last view: the second builds the view's blended field.
             engine.render()
             engine.render()
             compute = []
             for yaw in np.linspace(0.0, 90.0, repeats):
-                engine.set_lighting(read_panorama(PANORAMAS / "courtyard.exr"), yaw_deg=yaw)
+                engine.set_lighting(courtyard, yaw_deg=yaw)
                 compute.append(1e3 * engine.render().seconds["relight"])
             row: dict[str, Any] = {"mode": name, "settings": _mode_dict(mode)} | loop
             row["relight_compute_ms"] = float(np.median(compute))

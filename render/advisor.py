@@ -8,10 +8,10 @@ lighting the true relit value of sample p at measured camera s is a sum of measu
 
 - **lights**: the lights are split into up to ``MOST_FOLDS`` interleaved folds (one light each
   on a field of as few lights, so a sparse field loses little when one is held out); each fold
-  is held out,
-  predicted from the rest by the candidate's light predictor (its interpolation, or its model
-  refitted without the fold), and the held-out part of ``y`` compared. Errors add with their
-  sign, so a highlight that every neighbour misses in the same direction counts in full.
+  is held out, predicted from the rest by the candidate's light predictor (its interpolation,
+  or its model refitted without the fold), and the held-out part of ``y`` compared. Errors
+  add with their sign, so a highlight every neighbour misses in the same direction counts in
+  full.
 - **views**: the same with folds of cameras, predicted by the candidate's view interpolation
   (or its model refitted without them).
 - **lighting**: the candidate against the same predictor with exact lighting (every panorama
@@ -60,6 +60,9 @@ __all__ = [
     "default_candidates",
 ]
 
+#: A light or view predictor: ("model", model name, 0) or ("interpolation", method, m or n).
+Predictor = tuple[str, str, int]
+
 #: Most interleaved hold-out folds of lights and of cameras (fewer positions: one fold each).
 MOST_FOLDS = 12
 #: Fewest lights the hold-out works with, and fewest cameras for the views term.
@@ -89,19 +92,21 @@ class Candidate:
     mode: RelightMode
 
     @property
-    def light_predictor(self) -> tuple[str, ...]:
-        """What predicts an unmeasured light: ("model", name) or ("interpolation", method, m)."""
+    def light_predictor(self) -> Predictor:
+        """What predicts an unmeasured light: ("model", name, 0) or ("interpolation", method,
+        m), m the neighbours of the paper's cosine interpolation (0 for the other methods)."""
         if isinstance(self.mode, ModelRelightSettings):
-            return ("model", self.mode.model)
-        m = str(self.mode.m) if self.mode.interpolation == "paper" else ""
+            return ("model", self.mode.model, 0)
+        m = self.mode.m if self.mode.interpolation == "paper" else 0
         return ("interpolation", self.mode.interpolation, m)
 
     @property
-    def view_predictor(self) -> tuple[str, ...]:
-        """What predicts an uncaptured view: ("model", name) or ("interpolation", method, n)."""
+    def view_predictor(self) -> Predictor:
+        """What predicts an uncaptured view: ("model", name, 0) or ("interpolation", method,
+        n), as :attr:`light_predictor`."""
         if isinstance(self.mode, ModelRelightSettings):
-            return ("model", self.mode.model)
-        n = str(self.mode.n) if self.mode.view_interpolation == "paper" else ""
+            return ("model", self.mode.model, 0)
+        n = self.mode.n if self.mode.view_interpolation == "paper" else 0
         return ("interpolation", self.mode.view_interpolation, n)
 
     @property
@@ -240,22 +245,22 @@ def _folds(count: int) -> list[NDArray[np.int64]]:
     return [np.arange(f, count, folds, dtype=np.int64) for f in range(folds)]
 
 
-class _Accumulator:
-    """Sums of squared errors and of squared true values, per error term."""
+class _Sums:
+    """Sums of squared errors and of squared true values: a relative RMSE built up in parts."""
 
     def __init__(self) -> None:
-        self.error: dict[tuple[str, ...], float] = {}
-        self.energy: dict[tuple[str, ...], float] = {}
+        self.error = 0.0
+        self.energy = 0.0
 
-    def add(self, key: tuple[str, ...], predicted: NDArray[np.floating],
-            truth: NDArray[np.floating], mask: NDArray[np.bool_]) -> None:  # fmt: skip
-        difference = np.asarray(predicted, np.float64)[mask] - np.asarray(truth, np.float64)[mask]
-        self.error[key] = self.error.get(key, 0.0) + float(np.sum(difference**2))
-        self.energy[key] = self.energy.get(key, 0.0) + float(np.sum(np.square(truth[mask])))
+    def add(self, predicted: NDArray[np.floating], truth: NDArray[np.floating],
+            mask: NDArray[np.bool_]) -> None:  # fmt: skip
+        true = np.asarray(truth, np.float64)[mask]
+        self.error += float(np.sum((np.asarray(predicted, np.float64)[mask] - true) ** 2))
+        self.energy += float(np.sum(true**2))
 
-    def relative(self, key: tuple[str, ...]) -> float:
-        energy = self.energy.get(key, 0.0)
-        return math.sqrt(self.error[key] / energy) if energy > 0 else 0.0
+    @property
+    def relative(self) -> float:
+        return math.sqrt(self.error / self.energy) if self.energy > 0 else 0.0
 
 
 def _timed_radiance(
@@ -385,7 +390,7 @@ class Advisor:
 
     def hold_out_errors(
         self, weights: NDArray[np.floating]
-    ) -> tuple[dict[tuple[str, ...], float], dict[tuple[str, ...], float]]:
+    ) -> tuple[dict[Predictor, float], dict[Predictor, float]]:
         """The lights and views terms of every predictor the candidates use.
 
         Parameters
@@ -399,16 +404,25 @@ class Advisor:
             and fields of fewer than ``FEWEST_CAMERAS`` cameras
         """
         field = self.part
+        directions = field.light_directions
         w = np.asarray(weights, dtype=np.float64)
         light_keys = list(dict.fromkeys(c.light_predictor for c in self.candidates))
         view_keys = list(dict.fromkeys(c.view_predictor for c in self.candidates))
         light_folds, camera_folds = self._folds()
-        lights_acc, views_acc = _Accumulator(), _Accumulator()
+        lights = {key: _Sums() for key in light_keys}
+        views = {key: _Sums() for key in view_keys}
         # Lights: predict each fold's measured values at every camera.
         for fold in light_folds:
             kept, held = fold.kept, fold.held
             for engine in fold.engines.values():
-                engine.set_lights(EnvironmentLights(field.light_directions[held], w[held]))
+                engine.set_lights(EnvironmentLights(directions[held], w[held]))
+            # The light each kept light carries for the fold, per interpolation (T_kept, 3).
+            carried = {}
+            for key in light_keys:
+                if key[0] == "interpolation":
+                    a = interpolation_weights(directions[kept], directions[held], key[1],
+                                              m=key[2] or 3)  # fmt: skip
+                    carried[key] = a.dense(len(kept)).T @ w[held]
             for s in range(field.shape[0]):
                 slab = field.camera_slab(s).astype(np.float64)
                 truth = np.einsum("tc,tpc->pc", w[held], slab[held])
@@ -417,38 +431,32 @@ class Advisor:
                     if key[0] == "model":
                         fold.engines[key[1]].set_view(field.cameras[s])
                         image = fold.engines[key[1]].render()
-                        lights_acc.add(key, image.radiance, truth, seen & image.needed)
-                        continue
-                    m = int(key[2]) if key[2] else 3
-                    a = interpolation_weights(
-                        field.light_directions[kept], field.light_directions[held], key[1], m=m
-                    ).dense(len(kept))
-                    coefficients = a.T @ w[held]  # light each kept light carries for the fold
-                    predicted = np.einsum("jc,jpc->pc", coefficients, slab[kept])
-                    lights_acc.add(key, predicted, truth, seen)
+                        lights[key].add(image.radiance, truth, seen & image.needed)
+                    else:
+                        predicted = np.einsum("jc,jpc->pc", carried[key], slab[kept])
+                        lights[key].add(predicted, truth, seen)
         # Views: predict each fold's cameras from the others under the gathered lighting.
         gathered = LightWeights(w[None].astype(np.float32), None, 0.0, "projection")
         for fold in camera_folds:
             for engine in fold.engines.values():
-                engine.set_lights(EnvironmentLights(field.light_directions.copy(), w))
+                engine.set_lights(EnvironmentLights(directions.copy(), w))
             for s in fold.held:
-                slab = field.camera_slab(int(s)).astype(np.float64)
-                truth = np.einsum("tc,tpc->pc", w, slab)
+                camera = field.cameras[int(s)]
+                truth = np.einsum("tc,tpc->pc", w, field.camera_slab(int(s)).astype(np.float64))
                 seen = field.visibility[s]
                 for key in view_keys:
                     if key[0] == "model":
-                        fold.engines[key[1]].set_view(field.cameras[int(s)])
+                        fold.engines[key[1]].set_view(camera)
                         image = fold.engines[key[1]].render()
-                        views_acc.add(key, image.radiance, truth, seen & image.needed)
-                        continue
-                    n = int(key[2]) if key[2] else 3
-                    camera = field.cameras[int(s)]
-                    blend = blend_cameras(fold.part, camera, key[1], n=n, needed=seen)
-                    predicted = relight(fold.part, gathered, blend)
-                    views_acc.add(key, predicted, truth, seen & ~blend.holes)
+                        views[key].add(image.radiance, truth, seen & image.needed)
+                    else:
+                        blend = blend_cameras(fold.part, camera, key[1], n=key[2] or 3, needed=seen)
+                        views[key].add(
+                            relight(fold.part, gathered, blend), truth, seen & ~blend.holes
+                        )
         return (
-            {key: lights_acc.relative(key) for key in light_keys},
-            {key: views_acc.relative(key) for key in view_keys} if self.views_tested else {},
+            {key: sums.relative for key, sums in lights.items()},
+            {key: sums.relative for key, sums in views.items()} if self.views_tested else {},
         )
 
     def _engine(self, mode: RelightMode) -> RelightEngine:
@@ -484,9 +492,9 @@ class Advisor:
             # The worst view: a sun's highlight in a coarse lighting errs only where it shows.
             lighting = 0.0
             for (value, mask), (exact, exact_mask) in zip(relit, reference[key], strict=True):
-                acc = _Accumulator()
-                acc.add(("view",), value, exact, mask & exact_mask)
-                lighting = max(lighting, acc.relative(("view",)))
+                view = _Sums()
+                view.add(value, exact, mask & exact_mask)
+                lighting = max(lighting, view.relative)
             terms = (
                 lights[candidate.light_predictor],
                 views.get(candidate.view_predictor, 0.0),

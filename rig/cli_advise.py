@@ -42,8 +42,11 @@ def add_advisor_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--samples", type=int, default=3000, help="samples to predict on (default 3000)")
 
 
-def run_advisor(field_path: Path, env: Path, tolerance: float, samples: int) -> Advice:
-    """Open the field and the panorama, and advise (progress bars on)."""
+def run_advisor(
+    field_path: Path, env: Path, tolerance: float, samples: int
+) -> tuple[Advice, tuple[int, int]]:
+    """Open the field and the panorama, and advise (progress bars on); also returns the
+    field's camera and light counts."""
     from processing.panorama import read_panorama
     from processing.reflectance_field import ReflectanceField
     from render.advisor import Advisor
@@ -52,7 +55,8 @@ def run_advisor(field_path: Path, env: Path, tolerance: float, samples: int) -> 
     panorama = read_panorama(env)
     s, t, p = field.shape
     print(f"{field_path}: {s} cameras x {t} lights x {p} samples; environment {env}")
-    return Advisor(field, samples=samples, progress=True).advise(panorama, tolerance)
+    advice = Advisor(field, samples=samples, progress=True).advise(panorama, tolerance)
+    return advice, (s, t)
 
 
 def advice_json(advice: Advice) -> dict[str, Any]:
@@ -77,7 +81,7 @@ def advice_json(advice: Advice) -> dict[str, Any]:
 
 
 def _run_advise(args: argparse.Namespace) -> int:
-    advice = run_advisor(args.field, args.env, args.tolerance, args.samples)
+    advice, _ = run_advisor(args.field, args.env, args.tolerance, args.samples)
     print(advice.format())
     if args.json is not None:
         args.json.write_text(json.dumps(advice_json(advice), indent=2) + "\n")

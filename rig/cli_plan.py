@@ -136,7 +136,6 @@ def _run_plan(args: argparse.Namespace) -> int:
 def _advise_density(args: argparse.Namespace) -> int:
     """``rig plan --advise``: the density a pre-capture suggests, dry-run on a rig if given."""
     from capture.plan import grid_plan
-    from processing.reflectance_field import ReflectanceField
     from render.advisor import capture_density
     from rig.cli_advise import run_advisor
     from rig.config import load_config
@@ -146,9 +145,8 @@ def _advise_density(args: argparse.Namespace) -> int:
         raise InputError("rig plan --advise needs --env PANORAMA (the lighting to relight in)")
     if args.plan is not None:
         raise InputError("rig plan --advise suggests a plan; leave out --plan")
-    advice = run_advisor(args.advise, args.env, args.tolerance, args.samples)
+    advice, (cameras, lights) = run_advisor(args.advise, args.env, args.tolerance, args.samples)
     print(advice.format())
-    cameras, lights, _ = ReflectanceField.open(args.advise).shape
     density = capture_density(advice, cameras, lights)
     print(
         f"suggested capture: {density.cameras} cameras x {density.lights} lights "
