@@ -23,12 +23,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from bench.relight import Truth, image_errors
+from core.camera_model import PinholeCamera
 from processing.panorama import Panorama
 from processing.reflectance_field import ReflectanceField
 from processing.sample_models import SampleModels
 from render.advisor import Advisor
 from render.relight_mode import open_relighter
-from rig.camera_model import PinholeCamera
 
 __all__ = ["advisor_chart", "format_advisor", "validate_advisor"]
 

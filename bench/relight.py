@@ -26,6 +26,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from numpy.typing import NDArray
 
+from core.camera_model import PinholeCamera
+from core.sample_data import PANORAMA_NAMES, PanoramaName, panorama_path
 from processing.panorama import Panorama, panorama_from_array, read_panorama
 from processing.reflectance_field import ReflectanceField
 from processing.sample_model_store import models_for_field
@@ -42,7 +44,6 @@ from render.relight import (
 from render.relight_mode import MOST_ACCURATE_MODELS, RelightEngine, RelightMode, open_relighter
 from render.relighter import Relighter, RelightSettings, RelitImage
 from render.splat import splat
-from rig.camera_model import PinholeCamera
 from sim.field import field_cameras, simulate_field
 from sim.ground_truth import environment_lights, shade_environment, shade_environment_views
 from sim.scenes import SurfaceSamples, build_scene, get_scene
@@ -51,8 +52,6 @@ from sim.synthetic_camera import (
     camera_visibility,
     image_of_points,
 )
-
-PANORAMAS = Path(__file__).resolve().parents[2] / "shared" / "data" / "panoramas"
 
 
 def median_ms(run: Callable[[], object], repeats: int) -> float:
@@ -378,8 +377,8 @@ def truths_of_views(
     return truths
 
 
-def environments(name: str) -> dict[str, Panorama]:
-    full = read_panorama(PANORAMAS / name)
+def environments(name: PanoramaName) -> dict[str, Panorama]:
+    full = read_panorama(panorama_path(name))
     upper = full.rgb.copy()
     upper[full.rgb.shape[0] // 2 :] = 0.0  # an object on a black stand
     return {"full": full, "upper": panorama_from_array(upper, source=name)}
@@ -423,7 +422,7 @@ def bench_accuracy(out: Path, quick: bool) -> tuple[list[dict[str, Any]], list[d
                 "captured": field.cameras[index],
                 "between": between_view(field.cameras, index),
             }
-            for name in ("courtyard.exr", "studio.exr"):
+            for name in PANORAMA_NAMES:
                 for (env_name, panorama), (view_name, camera) in product(
                     environments(name).items(), views.items()
                 ):
@@ -529,7 +528,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", choices=("speed", "accuracy"), help="run one half")
     args = parser.parse_args(argv)
     args.output.mkdir(parents=True, exist_ok=True)
-    panorama = read_panorama(PANORAMAS / "courtyard.exr")
+    panorama = read_panorama(panorama_path("courtyard"))
     points = 50_000 if args.quick else 250_000
     target = args.output / "relight.json"
     results: dict[str, Any] = json.loads(target.read_text()) if target.exists() else {}

@@ -22,17 +22,16 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from core.colour import luminance
+from core.directions import panorama_directions, panorama_solid_angles
+from core.sample_data import panorama_path
 from processing.environment import LightingControls, light_environment
 from processing.halftone import DIFFUSION_METHODS, _diffuse, _method_tables, error_diffuse
 from processing.lights import disassemble_lights
 from processing.panorama import panorama_from_array, read_panorama
 from processing.sampling import SAMPLERS, sample_environment
-from rig.colour import luminance
-from rig.demo import bundled_panorama_path
-from rig.directions import panorama_directions, panorama_solid_angles
 
 KS = (8, 16, 32, 64, 128, 256, 512, 1024)
-SHARED_STUDIO = Path(__file__).resolve().parents[2] / "shared" / "data" / "panoramas" / "studio.exr"
 
 
 def _median_seconds(run: Callable[[], object], repeats: int) -> float:
@@ -214,12 +213,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("-o", "--output", type=Path, default=Path("bench-out"))
     parser.add_argument("--repeats", type=int, default=9)
-    parser.add_argument("--panorama", type=Path, default=bundled_panorama_path())
+    parser.add_argument("--panorama", type=Path, default=panorama_path("courtyard"))
     parser.add_argument(
         "--accuracy-panoramas",
         type=Path,
         nargs="*",
-        default=[bundled_panorama_path(), SHARED_STUDIO],
+        default=[panorama_path("courtyard"), panorama_path("studio")],
         help="panoramas for the accuracy table (missing files are skipped with a note)",
     )
     args = parser.parse_args(argv)

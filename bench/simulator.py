@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from core.camera_model import PinholeCamera
+from core.directions import direction_from_angles_deg
+from core.sample_data import panorama_path
 from processing.panorama import read_panorama
-from rig.camera_model import PinholeCamera
-from rig.demo import bundled_panorama_path
-from rig.directions import direction_from_angles_deg
 from sim.ground_truth import render_environment
 from sim.scenes import build_scene
 from sim.synthetic_camera import DirectionalLight, render_under_light
@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
                     "ms": ms,
                 }
             )
-    panorama = read_panorama(bundled_panorama_path()).rgb
+    panorama = read_panorama(panorama_path("courtyard")).rgb
     small = PinholeCamera(30.0, 60.0, 4.0, 40.0, 256, 256)
     for scene, shadows in (("glossy-sphere", False), ("textured-torus", True)):
         samples = build_scene(scene, 50_000)

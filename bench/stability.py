@@ -25,19 +25,20 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from bench.relight import PANORAMAS, image_errors, truth_of
+from bench.relight import image_errors, truth_of
 from capture.dataset import Dataset, ImageKey
-from processing.field_builder import RigCamera, field_layout
+from core.camera_model import PinholeCamera, RigCamera
+from core.colour import luminance
+from core.directions import panorama_solid_angles
+from core.errors import DatasetError
+from core.sample_data import panorama_path
+from processing.field_layout import field_layout
 from processing.panorama import panorama_from_array, read_panorama
 from processing.reflectance_field import ReflectanceField
 from processing.sample_models import SampleModels, fit_sample_models
 from render.guards import relight_warnings
 from render.relight_mode import MOST_ACCURATE_MODELS, RelightMode, open_relighter
 from render.relighter import RelightSettings, best_settings
-from rig.camera_model import PinholeCamera
-from rig.colour import luminance
-from rig.directions import panorama_solid_angles
-from rig.errors import DatasetError
 from sim.field import field_cameras, simulate_field
 from sim.scenes import build_scene, get_scene
 from sim.sensor import Sensor, expose, radiance_from_dn
@@ -245,7 +246,7 @@ def run_stability(out: Path, quick: bool) -> dict[str, Any]:
     sizes = Sizes(2000, 64) if quick else Sizes(3000, 96)
     rows: list[dict[str, Any]] = []
     sun, no_sun = _sky(0.9), _sky(0.0)
-    courtyard = read_panorama(PANORAMAS / "courtyard.exr").rgb
+    courtyard = read_panorama(panorama_path("courtyard")).rgb
 
     def field(scene: str, cameras: int, lights: int) -> ReflectanceField:
         return _field(out, scene, cameras, lights, sizes)

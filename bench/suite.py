@@ -31,7 +31,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, fields, is_dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import cv2
 import numba
@@ -41,7 +41,6 @@ from numpy.typing import NDArray
 from bench.advisor import validate_advisor
 from bench.capture import bench_capture
 from bench.relight import (
-    PANORAMAS,
     Truth,
     between_view,
     copy_bandwidth,
@@ -52,6 +51,10 @@ from bench.relight import (
 )
 from bench.report import write_report
 from bench.stability import run_stability
+from core.camera_model import PinholeCamera
+from core.colour import linear_to_srgb
+from core.errors import InputError
+from core.sample_data import PanoramaName, panorama_path
 from processing.panorama import Panorama, panorama_from_array, read_panorama
 from processing.reflectance_field import ReflectanceField
 from processing.sample_model_store import (
@@ -70,9 +73,6 @@ from render.relight_mode import (
     open_relighter,
 )
 from render.relighter import Relighter, RelightSettings, RelitImage
-from rig.camera_model import PinholeCamera
-from rig.colour import linear_to_srgb
-from rig.errors import InputError
 from sim.scenes import SurfaceSamples, build_scene, get_scene
 from sim.skies import ldr_photo, procedural_sky
 from sim.synthetic_camera import camera_visibility, image_of_points
@@ -287,7 +287,7 @@ class Environment:
 
 
 def environments(names: Sequence[str], sky_height: int = 256) -> dict[str, Environment]:
-    """The named environments: "courtyard", "studio" (the shared panoramas), "sky" (procedural,
+    """The named environments: "courtyard", "studio" (the bundled panoramas), "sky" (procedural,
     with a small, very bright sun), each optionally with " LDR" (its 8-bit sRGB photo)."""
     hdr: dict[str, Panorama] = {}
     out: dict[str, Environment] = {}
@@ -297,7 +297,7 @@ def environments(names: Sequence[str], sky_height: int = 256) -> dict[str, Envir
             if base == "sky":
                 hdr[base] = panorama_from_array(procedural_sky(sky_height), source="procedural sky")
             else:
-                hdr[base] = read_panorama(PANORAMAS / f"{base}.exr")
+                hdr[base] = read_panorama(panorama_path(cast(PanoramaName, base)))
         panorama = hdr[base]
         ldr = name != base
         if ldr:
@@ -591,7 +591,7 @@ def bench_product(
             "models, sampled K=64": k_method("models, sampled", CHAIN_K).mode,
         }
         loops = []
-        courtyard = read_panorama(PANORAMAS / "courtyard.exr")
+        courtyard = read_panorama(panorama_path("courtyard"))
         for name, mode in modes.items():
             engine: RelightEngine = open_relighter(chain.field, mode, chain.models)
             loop = loop_ms(engine, courtyard, repeats, camera)

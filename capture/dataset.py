@@ -8,7 +8,7 @@ A dataset is a directory::
         journal.jsonl    append-only run documents (capture.journal): the source of truth for resume
         images/          the images (.dng .cr2 .nef .tif .tiff .png .exr .jpg)
 
-Every file is written atomically (temporary name, fsync, rename; ``rig.atomic``), so a file named
+Every file is written atomically (temporary name, fsync, rename; ``core.atomic``), so a file named
 by the manifest or the journal is never half-written. Paths in records are relative to the
 dataset, under ``images/``, in ``/``-separated canonical form; an absolute path, one that climbs
 out with ``..`` or a symlink that leads out of the directory is refused.
@@ -32,8 +32,8 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
 from capture.journal import JOURNAL_NAME, ImageKey, Journal, JournalContents, read_journal
-from rig.atomic import atomic_path, write_json_atomic
-from rig.errors import DatasetError, InputError
+from core.atomic import atomic_path, write_json_atomic
+from core.errors import DatasetError, InputError
 
 __all__ = [
     "IMAGES_DIR",
@@ -78,7 +78,7 @@ _RECORD_KEYS = (
 # Portable names that RTI tools (which split .lp lines on whitespace) and every OS accept.
 _SEGMENT = re.compile(r"[A-Za-z0-9_+-][A-Za-z0-9._+-]*")
 _SHA256 = re.compile(r"[0-9a-f]{64}")
-# rig.atomic's temporary names: ".<stem>.<pid>.partial<suffix>".
+# core.atomic's temporary names: ".<stem>.<pid>.partial<suffix>".
 _PARTIAL = re.compile(r"\..*\.\d+\.partial(\.[^.]*)?")
 
 

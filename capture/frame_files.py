@@ -14,8 +14,8 @@ import cv2
 import numpy as np
 import tifffile
 
+from core.errors import InputError
 from rig.devices import Frame
-from rig.errors import InputError
 
 __all__ = ["frame_file"]
 

@@ -32,7 +32,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Literal, Protocol, get_args
 
-from rig.errors import DatasetError, InputError
+from core.errors import DatasetError, InputError
 
 __all__ = [
     "EXIT_STATUSES",

@@ -3,7 +3,7 @@
 An ``.lp`` file is ``N`` on the first line, then ``filename x y z`` per image, the direction from
 the object toward the light in the CAMERA frame: x to the image's right, y to the image's top, z
 toward the camera (the frame of ``processing.rti``, which reads these files back). The camera frame
-is :meth:`rig.camera_model.PinholeCamera.axes` of the image's camera pose. A turntable angle turns
+is :meth:`core.camera_model.PinholeCamera.axes` of the image's camera pose. A turntable angle turns
 the object, not the camera-light pair, so it does not change these directions and is ignored.
 """
 
@@ -18,10 +18,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from capture.dataset import Dataset, ImageRecord
-from rig.atomic import atomic_path
-from rig.camera_model import PinholeCamera
-from rig.directions import direction_from_angles_deg
-from rig.errors import DatasetError, InputError
+from core.atomic import atomic_path
+from core.camera_model import PinholeCamera
+from core.directions import direction_from_angles_deg
+from core.errors import DatasetError, InputError
 
 __all__ = ["export_lp", "light_in_camera_frame"]
 

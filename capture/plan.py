@@ -34,10 +34,10 @@ from capture.plan_order import (
     Unplaced,
     schedules,
 )
+from core.directions import angles_deg_from_direction, hemisphere_layout
+from core.errors import ConfigError, InputError
 from rig.config import RigConfig
 from rig.config_schema import Table, read_toml
-from rig.directions import angles_deg_from_direction, hemisphere_layout
-from rig.errors import ConfigError, InputError
 from rig.pose import CAMERA_ROLES, LIGHT_ROLES, ROLES, RigPose
 
 __all__ = [
@@ -57,7 +57,7 @@ __all__ = [
 
 #: Version of the plan's dict and TOML form.
 PLAN_SCHEMA_VERSION = 1
-#: Hemisphere layouts of :func:`rig.directions.hemisphere_layout`.
+#: Hemisphere layouts of :func:`core.directions.hemisphere_layout`.
 LAYOUTS = ("grid", "fibonacci")
 #: The most poses one range may give (a tiny step is a typo, not a plan).
 MAX_RANGE_VALUES = 10_000
@@ -371,7 +371,7 @@ class SweepPlan:
 def layout_angles(count: int, layout: str) -> tuple[Angles, ...]:
     """``count`` (azimuth_deg, inclination_deg) over the upper hemisphere in ``layout``.
 
-    The directions of :func:`rig.directions.hemisphere_layout`, which the simulator's fields
+    The directions of :func:`core.directions.hemisphere_layout`, which the simulator's fields
     use too (``sim.field.field_cameras`` and the lights of ``sim.field.simulate_field``).
     """
     if isinstance(count, bool) or not isinstance(count, int) or count < 1:

@@ -38,10 +38,10 @@ from capture.journal import (
     runs,
 )
 from capture.plan import CaptureEvent, SweepPlan
+from core.errors import DeviceError, RigError, SafetyError
 from rig.config import RigConfig
 from rig.devices import Frame
 from rig.dynamixel import ServoHardwareError
-from rig.errors import DeviceError, RigError, SafetyError
 from rig.grbl import GrblAlarmError
 from rig.pose import RigPose
 

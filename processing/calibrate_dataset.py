@@ -36,6 +36,9 @@ from numpy.typing import NDArray
 
 from capture.dataset import Dataset, ImageRecord
 from capture.plan import SweepPlan
+from core.camera_model import RigCamera
+from core.directions import direction_from_angles_deg
+from core.errors import DatasetError, RigError
 from processing.calibration import (
     CalibratedCamera,
     Calibration,
@@ -46,11 +49,8 @@ from processing.calibration import (
 )
 from processing.charuco import ChArUcoTarget, board_extrinsics, calibrate_intrinsics
 from processing.decode import decode_image
-from processing.field_builder import RigCamera
 from processing.light_falloff import WhiteReference, light_intensity_and_falloff
 from processing.light_probe import MirrorSphere, light_directions_from_mirror_sphere
-from rig.directions import direction_from_angles_deg
-from rig.errors import DatasetError, RigError
 
 __all__ = [
     "DEFAULT_BOARD",

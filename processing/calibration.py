@@ -11,8 +11,8 @@ Frames and pixels (``docs/calibration.md``):
 - Positions and directions are in the rig frame (``docs/conventions.md``): ``+z`` up, scene
   units, directions from the object toward the camera or light.
 - A camera's ``axes`` are its right, up and forward unit vectors in the rig frame, as
-  :meth:`rig.camera_model.PinholeCamera.axes` (image columns grow along right, rows against up).
-- Pixel coordinates follow :mod:`rig.camera_model`: pixel (row i, col j) covers
+  :meth:`core.camera_model.PinholeCamera.axes` (image columns grow along right, rows against up).
+- Pixel coordinates follow :mod:`core.camera_model`: pixel (row i, col j) covers
   [j, j + 1) x [i, i + 1), so its centre is (j + 0.5, i + 0.5) and a PinholeCamera's principal
   point is exactly (W / 2, H / 2). OpenCV puts pixel centres at integers; the conversion
   (0.5 pixel) happens only here (:meth:`Intrinsics.camera_matrix`).
@@ -34,10 +34,10 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from rig.camera_model import PinholeCamera
-from rig.colour import srgb_to_linear
-from rig.directions import angles_deg_from_direction, normalize
-from rig.errors import DatasetError, InputError
+from core.camera_model import PinholeCamera
+from core.colour import srgb_to_linear
+from core.directions import angles_deg_from_direction, normalize
+from core.errors import DatasetError, InputError
 
 __all__ = [
     "CALIBRATION_SCHEMA",
@@ -359,7 +359,7 @@ class CalibratedCamera:
     def rays(self, cols: ArrayLike, rows: ArrayLike) -> F64:
         """Unit ray directions (N, 3) in the rig frame through pixel coordinates (N,).
 
-        Coordinates as :mod:`rig.camera_model` (pixel (i, j) centred at (j + 0.5, i + 0.5)).
+        Coordinates as :mod:`core.camera_model` (pixel (i, j) centred at (j + 0.5, i + 0.5)).
         """
         c = np.asarray(cols, dtype=np.float64).ravel()
         r = np.asarray(rows, dtype=np.float64).ravel()

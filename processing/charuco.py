@@ -23,6 +23,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from core.camera_model import PinholeCamera
+from core.errors import InputError
 from processing.calibration import (
     CameraPose,
     ImageInput,
@@ -31,8 +33,6 @@ from processing.calibration import (
     linear_luminance,
     load_image,
 )
-from rig.camera_model import PinholeCamera
-from rig.errors import InputError
 
 __all__ = [
     "FLAT_BOARD",

@@ -42,8 +42,8 @@ import rawpy
 import tifffile
 from numpy.typing import NDArray
 
-from rig.colour import srgb_to_linear
-from rig.errors import DatasetError, InputError
+from core.colour import srgb_to_linear
+from core.errors import DatasetError, InputError
 
 __all__ = [
     "DEMOSAIC_ALGORITHMS",

@@ -14,10 +14,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from core.errors import InputError
 from processing.lights import LightSet, disassemble_lights
 from processing.panorama import Panorama, adjust_panorama, read_image
 from processing.sampling import SamplerName, sample_environment
-from rig.errors import InputError
 
 __all__ = ["EnvironmentLighting", "LightingControls", "light_environment", "read_modulation_map"]
 

@@ -39,13 +39,13 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from core.errors import InputError
 from processing.halftone_tables import (
     FLOYD_STEINBERG_WEIGHTS,
     OSTROMOUKHOV_COEFFICIENTS,
     TMED_COEFFICIENTS,
     TMED_THRESHOLD_MODULATION,
 )
-from rig.errors import InputError
 
 __all__ = ["DIFFUSION_METHODS", "DiffusionMethod", "error_diffuse", "halftone"]
 

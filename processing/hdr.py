@@ -27,8 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from core.errors import InputError
 from processing.decode import DecodedImage, DecodeError
-from rig.errors import InputError
 
 __all__ = ["HAT_FLOOR", "HAT_LOW", "HAT_TOP", "Exposure", "MergedImage", "hat", "merge_exposures"]
 

@@ -46,13 +46,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from rig.directions import (
+from core.directions import (
     angle_between,
     angles_deg_from_direction,
     direction_from_angles,
     direction_from_angles_deg,
 )
-from rig.errors import InputError
+from core.errors import InputError
 
 __all__ = [
     "METHODS",

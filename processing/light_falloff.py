@@ -22,6 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from core.camera_model import PinholeCamera
+from core.directions import normalize
+from core.errors import InputError
 from processing.calibration import (
     CalibratedCamera,
     ImageInput,
@@ -29,9 +32,6 @@ from processing.calibration import (
     linear_luminance,
     load_image,
 )
-from rig.camera_model import PinholeCamera
-from rig.directions import normalize
-from rig.errors import InputError
 
 __all__ = ["LightIntensities", "WhiteReference", "light_intensity_and_falloff"]
 

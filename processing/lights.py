@@ -22,12 +22,12 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.directions import (
+from core.directions import (
     panorama_azimuths,
     panorama_inclinations,
     panorama_row_solid_angles,
 )
-from rig.errors import InputError
+from core.errors import InputError
 
 __all__ = ["LightSet", "disassemble_lights", "nearest_sample_labels"]
 

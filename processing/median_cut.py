@@ -17,7 +17,7 @@ import heapq
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.directions import panorama_directions, panorama_inclinations
+from core.directions import panorama_directions, panorama_inclinations
 
 __all__ = ["median_cut_regions", "median_cut_sample"]
 

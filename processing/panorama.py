@@ -1,7 +1,7 @@
 """Equirectangular environment panoramas: reading, validating and writing.
 
 In memory a panorama is linear float32 RGB radiance of shape (H, W, 3) with W = 2H, mapped to
-directions as ``rig.directions`` says. Readers: 8/16-bit PNG and JPEG (sRGB-decoded to linear
+directions as ``core.directions`` says. Readers: 8/16-bit PNG and JPEG (sRGB-decoded to linear
 unless told otherwise), OpenEXR (any compression the OpenEXR library knows, DWAB included) and
 Radiance ``.hdr``. Writers: EXR (float32 RGB), PNG (sRGB, 8 or 16 bit) and ``.hdr``.
 """
@@ -18,10 +18,10 @@ import numpy as np
 import OpenEXR
 from numpy.typing import NDArray
 
-from rig.atomic import atomic_path
-from rig.colour import linear_to_srgb, srgb_to_linear
-from rig.directions import panorama_solid_angles, rotate_panorama_yaw
-from rig.errors import InputError, PanoramaError
+from core.atomic import atomic_path
+from core.colour import linear_to_srgb, srgb_to_linear
+from core.directions import panorama_solid_angles, rotate_panorama_yaw
+from core.errors import InputError, PanoramaError
 
 __all__ = [
     "NEGATIVE_TOLERANCE",

@@ -1,4 +1,4 @@
-"""Reading a reflectance-field store (the Zarr group of :mod:`rig.field_store`), lazily.
+"""Reading a reflectance-field store (the Zarr group of :mod:`core.field_store`), lazily.
 
 Opening reads only the small arrays (directions, visibility, points, normals) and the
 attributes; radiance is read one camera's slab (T, P, 3) at a time, when relighting needs it,
@@ -17,9 +17,9 @@ import numpy as np
 import zarr
 from numpy.typing import NDArray
 
-from rig.camera_model import PinholeCamera
-from rig.errors import DatasetError, InputError
-from rig.field_store import FIELD_SCHEMA_VERSION
+from core.camera_model import PinholeCamera
+from core.errors import DatasetError, InputError
+from core.field_store import FIELD_SCHEMA_VERSION
 
 __all__ = ["ReflectanceField"]
 

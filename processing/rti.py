@@ -15,11 +15,11 @@ lines and float32-rounded vectors; all are accepted (every direction is normalis
 disagrees with the entries, a missing or non-numeric value, a zero or non-finite vector is refused
 with the file and line number.
 
-Imported, an RTI capture becomes a field of pixels (``rig.field_store``, samples of kind
+Imported, an RTI capture becomes a field of pixels (``core.field_store``, samples of kind
 ``"pixels"``) with one camera straight above the object (azimuth 0, inclination 0): the object
 plane is the rig's xy-plane and a light's camera z is its rig z (the cosine of its inclination).
 That camera's image right is rig ``+y`` and its image up is rig ``-x`` (the limit of
-:meth:`rig.camera_model.PinholeCamera.axes` approached from azimuth 0). An RTI file does not
+:meth:`core.camera_model.PinholeCamera.axes` approached from azimuth 0). An RTI file does not
 record the camera's distance or field of view; nominal values are stored and marked as such.
 """
 
@@ -36,12 +36,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from tqdm import tqdm
 
+from core.atomic import atomic_path
+from core.camera_model import PinholeCamera
+from core.errors import DatasetError, InputError, PanoramaError
+from core.field_store import FieldStoreWriter
 from processing.panorama import read_image
 from processing.reflectance_field import ReflectanceField
-from rig.atomic import atomic_path
-from rig.camera_model import PinholeCamera
-from rig.errors import DatasetError, InputError, PanoramaError
-from rig.field_store import FieldStoreWriter
 
 __all__ = [
     "NOMINAL_DISTANCE",

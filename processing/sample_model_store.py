@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from core.atomic import atomic_path
+from core.errors import DatasetError
 from processing.reflectance_field import ReflectanceField
 from processing.sample_models import (
     BasisFit,
@@ -30,8 +32,6 @@ from processing.sample_models import (
     SampleModels,
     fit_sample_models,
 )
-from rig.atomic import atomic_path
-from rig.errors import DatasetError
 
 __all__ = [
     "FORMAT_VERSION",

@@ -91,17 +91,17 @@ from typing import Any
 import numba
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 from scipy.special import factorial, lpmv
 from tqdm import tqdm
 
+from core.colour import REC709_LUMINANCE
+from core.directions import fibonacci_sphere
+from core.errors import DatasetError, InputError
+from core.point_spacing import median_neighbour_distance
+from core.splat import depth_at_points, zbuffer
 from processing.interpolation import interpolation_weights
 from processing.reflectance_field import ReflectanceField
 from processing.rti import rig_to_camera
-from rig.colour import REC709_LUMINANCE
-from rig.directions import fibonacci_sphere
-from rig.errors import DatasetError, InputError
-from rig.splat import depth_at_points, zbuffer
 
 __all__ = [
     "ALPHA_RANGE",
@@ -1316,14 +1316,6 @@ def _fit_parametric(
 # Geometric shadow marks: completing the measured ones
 
 
-def _median_spacing(points: NDArray[np.float64], sample: int = 20_000) -> float:
-    """Median distance from a point to its nearest neighbour (on a fixed subset)."""
-    rng = np.random.default_rng(0)
-    probe = points[rng.choice(len(points), size=min(sample, len(points)), replace=False)]
-    distance, _ = cKDTree(points).query(probe, k=2)
-    return float(np.median(distance[:, 1]))
-
-
 def geometric_shadow_marks(
     points: NDArray[np.floating],
     normals: NDArray[np.floating],
@@ -1333,7 +1325,7 @@ def geometric_shadow_marks(
     """Shadow marks of every point for directional lights, from the point cloud's own geometry.
 
     One orthographic shadow map per direction: the points as disks one spacing wide in a
-    z-buffer seen from the light (``rig.splat``), a point lit when it is no deeper than the
+    z-buffer seen from the light (``core.splat``), a point lit when it is no deeper than the
     front surface plus a slope-scaled bias. Marks follow the fitted ones' convention: 1 lit
     or facing away (the attached shadow is the model's cosine), 0 shadowed.
 
@@ -1357,7 +1349,7 @@ def geometric_shadow_marks(
         )
     if toward.ndim != 2 or toward.shape[1] != 3:
         raise InputError(f"shadow directions must be (G, 3), got {toward.shape}")
-    gap = _median_spacing(cloud) if spacing is None else float(spacing)
+    gap = median_neighbour_distance(cloud, 20_000) if spacing is None else float(spacing)
     if not gap > 0:
         raise InputError(f"point spacing must be positive, got {gap}")
     marks = np.ones((len(cloud), len(toward)), dtype=np.float32)

@@ -34,10 +34,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from processing.halftone import DIFFUSION_METHODS, error_diffuse
-from processing.median_cut import median_cut_sample
-from rig.colour import luminance
-from rig.directions import (
+from core.colour import luminance
+from core.directions import (
     direction_from_angles,
     fibonacci_sphere,
     panorama_azimuths,
@@ -45,7 +43,9 @@ from rig.directions import (
     panorama_pixel_points,
     panorama_row_solid_angles,
 )
-from rig.errors import InputError
+from core.errors import InputError
+from processing.halftone import DIFFUSION_METHODS, error_diffuse
+from processing.median_cut import median_cut_sample
 
 __all__ = [
     "SAMPLERS",

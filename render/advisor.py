@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm import tqdm
 
+from core.errors import InputError
 from processing.interpolation import interpolation_weights
 from processing.panorama import Panorama
 from processing.reflectance_field import ReflectanceField
@@ -47,7 +48,6 @@ from render.model_relight import EnvironmentLights, ModelRelighter, ModelRelight
 from render.relight import blend_cameras, relight
 from render.relight_mode import RelightEngine, RelightMode
 from render.relighter import Relighter, RelightSettings
-from rig.errors import InputError
 
 __all__ = [
     "Advice",

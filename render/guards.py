@@ -17,15 +17,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from core.camera_model import PinholeCamera
+from core.colour import luminance
+from core.directions import angle_between, panorama_directions, panorama_solid_angles
+from core.errors import InputError
 from processing.interpolation import mean_spacing_deg
 from processing.reflectance_field import ReflectanceField
 from processing.sample_models import ParametricFit, SampleModels, choose_model
 from render.model_relight import ModelRelightSettings
 from render.relighter import RelightSettings
-from rig.camera_model import PinholeCamera
-from rig.colour import luminance
-from rig.directions import angle_between, panorama_directions, panorama_solid_angles
-from rig.errors import InputError
 
 __all__ = [
     "RelightWarning",

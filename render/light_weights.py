@@ -24,12 +24,12 @@ import scipy.sparse
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from core.colour import REC709_LUMINANCE
+from core.directions import fibonacci_sphere, panorama_directions, panorama_solid_angles
+from core.errors import InputError
 from processing.interpolation import interpolation_weights
 from processing.lights import LightSet, disassemble_lights
 from processing.panorama import downsample_panorama
-from rig.colour import REC709_LUMINANCE
-from rig.directions import fibonacci_sphere, panorama_directions, panorama_solid_angles
-from rig.errors import InputError
 
 __all__ = [
     "LightWeights",

@@ -5,11 +5,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from core.atomic import write_json_atomic
 from processing.environment import EnvironmentLighting, LightingControls, light_environment
 from processing.panorama import Panorama
 from render.overlay import disassembled_picture, sample_overlay, write_png
 from render.tonemap import auto_exposure
-from rig.atomic import write_json_atomic
 
 __all__ = ["write_lighting_outputs"]
 

@@ -47,6 +47,11 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from core.camera_model import PinholeCamera
+from core.colour import REC709_LUMINANCE
+from core.directions import panorama_directions, panorama_solid_angles
+from core.errors import InputError
+from core.point_spacing import point_spacing
 from processing.interpolation import interpolation_weights
 from processing.lights import LightSet, disassemble_lights
 from processing.panorama import Panorama, adjust_panorama
@@ -65,11 +70,7 @@ from processing.sample_models import (
 )
 from processing.sampling import SamplerName, sample_environment
 from render.relighter import RelitImage
-from render.splat import SplatPlan, plan_splats, point_spacing, splat
-from rig.camera_model import PinholeCamera
-from rig.colour import REC709_LUMINANCE
-from rig.directions import panorama_directions, panorama_solid_angles
-from rig.errors import InputError
+from render.splat import SplatPlan, plan_splats, splat
 
 __all__ = [
     "LIGHTING_MODES",
@@ -419,7 +420,7 @@ class ModelRelightSettings:
     visibility : one of ``VISIBILITY_MODES`` (pixel fields: always the measured marks)
     spacing : float, optional
         Point spacing for splats and shadow maps (default: the median nearest-neighbour
-        distance, :func:`render.splat.point_spacing`).
+        distance, :func:`core.point_spacing.point_spacing`).
     """
 
     model: str = "auto"

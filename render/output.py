@@ -14,11 +14,11 @@ import imageio.v2 as imageio
 import numpy as np
 from numpy.typing import NDArray
 
+from core.atomic import atomic_path
+from core.errors import InputError
 from processing.panorama import write_exr_rgba
 from render.overlay import write_png
 from render.tonemap import auto_exposure, to_uint8, tone_map
-from rig.atomic import atomic_path
-from rig.errors import InputError
 
 __all__ = [
     "IMAGE_SUFFIXES",

@@ -8,11 +8,11 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from core.atomic import atomic_path
+from core.directions import panorama_pixel_from_direction
+from core.errors import InputError
 from processing.lights import LightSet
 from render.tonemap import to_uint8, tone_map
-from rig.atomic import atomic_path
-from rig.directions import panorama_pixel_from_direction
-from rig.errors import InputError
 
 __all__ = ["cell_borders", "disassembled_picture", "sample_overlay", "write_png"]
 

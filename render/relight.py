@@ -19,13 +19,13 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from core.camera_model import PinholeCamera
+from core.directions import panorama_directions, panorama_solid_angles
+from core.errors import InputError
 from processing.interpolation import interpolation_weights
 from processing.panorama import downsample_panorama
 from processing.reflectance_field import ReflectanceField
 from render.light_weights import LightWeights
-from rig.camera_model import PinholeCamera
-from rig.directions import panorama_directions, panorama_solid_angles
-from rig.errors import InputError
 
 __all__ = [
     "ViewBlend",

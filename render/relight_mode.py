@@ -15,13 +15,13 @@ import os
 from dataclasses import dataclass
 from typing import Protocol
 
+from core.camera_model import PinholeCamera
 from processing.panorama import Panorama
 from processing.reflectance_field import ReflectanceField
 from processing.sample_model_store import models_for_field
 from processing.sample_models import SampleModels, choose_model, interpolation_loo
 from render.model_relight import ModelRelighter, ModelRelightSettings
 from render.relighter import Relighter, RelightSettings, RelitImage, best_settings
-from rig.camera_model import PinholeCamera
 
 __all__ = [
     "MOST_ACCURATE_MODELS",

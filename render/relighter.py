@@ -15,6 +15,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from core.camera_model import PinholeCamera
+from core.errors import InputError
+from core.point_spacing import point_spacing
 from processing.lights import LightSet, disassemble_lights
 from processing.panorama import Panorama, adjust_panorama
 from processing.reflectance_field import ReflectanceField
@@ -33,9 +36,7 @@ from render.relight import (
     relight_camera,
     relight_view,
 )
-from render.splat import SplatPlan, plan_splats, point_spacing, splat
-from rig.camera_model import PinholeCamera
-from rig.errors import InputError
+from render.splat import SplatPlan, plan_splats, splat
 
 __all__ = ["SCHEMES", "RelightSettings", "Relighter", "RelitImage", "best_settings"]
 

@@ -4,7 +4,7 @@ For a fixed view, which pixels each visible point covers and with what weight do
 on the lighting. :func:`plan_splats` finds it once (a z-buffer of disks one point spacing wide,
 then every splat within a depth tolerance of the front surface, weighted by 1 - (d / r)^2 and
 normalised per pixel) and stores it as a sparse pixel x point matrix; :func:`splat` then costs
-one sparse product per frame. The disk kernels are :mod:`rig.splat`, shared with the simulator.
+one sparse product per frame. The disk kernels are :mod:`core.splat`, shared with the simulator.
 """
 
 from __future__ import annotations
@@ -14,13 +14,13 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
-from rig.camera_model import PinholeCamera
-from rig.errors import InputError
-from rig.splat import camera_splats, disk_bounds
+from core.camera_model import PinholeCamera
+from core.errors import InputError
+from core.point_spacing import point_spacing
+from core.splat import camera_splats, disk_bounds
 
-__all__ = ["SplatPlan", "plan_splats", "point_spacing", "splat"]
+__all__ = ["SplatPlan", "plan_splats", "splat"]
 
 
 @dataclass(frozen=True)
@@ -47,36 +47,6 @@ class SplatPlan:
     def coverage(self) -> NDArray[np.bool_]:
         """Pixels the object covers; shape (H, W)."""
         return (np.diff(self.pixel_start) > 0).reshape(self.height, self.width)
-
-
-#: The neighbourhood that measures the point density, in median nearest-neighbour distances.
-DENSITY_RADIUS = 6.5
-
-
-def point_spacing(points: NDArray[np.floating], sample: int = 2_000, seed: int = 0) -> float:
-    """The side of the surface area per point, sqrt(area / P), estimated from the points alone.
-
-    Within a radius R of DENSITY_RADIUS median nearest-neighbour distances (not a whole
-    number: a lattice has whole shells of neighbours there) a surface holds
-    n(R) points on about pi R^2 of area, so the area per point is pi R^2 / n(R) (median over a
-    random subset of ``sample`` points). This is the spacing the simulator splats with (it knows
-    the area); the nearest-neighbour distance itself is about 5 % smaller on the near-uniform
-    layouts of a capture, and splats that much smaller differ visibly at silhouettes and
-    highlights (docs/models.md, "Splat size"). Scene units.
-    """
-    cloud = np.asarray(points, dtype=np.float64)
-    if len(cloud) < 2:
-        raise InputError(f"a point cloud needs at least 2 points to splat, got {len(cloud)}")
-    rng = np.random.default_rng(seed)
-    probe = cloud[rng.choice(len(cloud), size=min(sample, len(cloud)), replace=False)]
-    tree = cKDTree(cloud)
-    distance, _ = tree.query(probe, k=2)
-    nearest = float(np.median(distance[:, 1]))
-    if not nearest > 0:
-        raise InputError("the point cloud has coincident points; cannot estimate its spacing")
-    radius = DENSITY_RADIUS * nearest
-    counts = tree.query_ball_point(probe, radius, return_length=True)
-    return float(np.sqrt(np.pi * radius**2 / np.median(counts)))
 
 
 def plan_splats(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.colour import linear_to_srgb, luminance
+from core.colour import linear_to_srgb, luminance
 
 __all__ = ["auto_exposure", "to_uint8", "tone_map"]
 

@@ -14,8 +14,8 @@ import os
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.camera_model import PinholeCamera
-from rig.errors import InputError
+from core.camera_model import PinholeCamera
+from core.errors import InputError
 
 __all__ = ["pyvista_picture", "show_points"]
 

@@ -21,9 +21,9 @@ import os
 from pathlib import Path
 from typing import Any
 
-from rig.atomic import atomic_path
+from core.atomic import atomic_path
+from core.errors import DeviceError
 from rig.devices import CameraTimeoutError, Frame, frame_metadata
-from rig.errors import DeviceError
 
 __all__ = ["GPhoto2Camera", "import_gphoto2", "shutter_seconds"]
 

@@ -2,7 +2,7 @@
 
 OpenCV's camera properties are backend specific and a driver may accept, refuse or silently
 ignore a ``set``: every set here is checked by reading the property back, and a refused or
-ignored one is a :class:`~rig.errors.DeviceError` naming the property, the value and the
+ignored one is a :class:`~core.errors.DeviceError` naming the property, the value and the
 backend. Manual exposure is ``CAP_PROP_AUTO_EXPOSURE = auto_exposure_off`` (V4L2: 1, the
 ``V4L2_EXPOSURE_MANUAL`` menu entry; DirectShow: 0.25) followed by ``CAP_PROP_EXPOSURE`` in the
 driver's unit (V4L2 ``exposure_time_absolute``: 100 microsecond steps; DirectShow and Media
@@ -25,8 +25,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from core.errors import DeviceError, InputError
 from rig.devices import CameraTimeoutError, Frame, frame_metadata
-from rig.errors import DeviceError, InputError
 
 __all__ = [
     "OPENCV_APIS",

@@ -24,8 +24,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from core.errors import DeviceError, InputError
 from rig.devices import Frame, LightState, RigStateSource, frame_metadata
-from rig.errors import DeviceError, InputError
 from rig.pose import RigPose
 
 __all__ = ["DECODED_SUFFIXES", "ReplayCamera", "ReplayLookup"]

@@ -8,6 +8,7 @@ The backends live in their own modules: :mod:`rig.camera_opencv` (UVC through Op
 
 from __future__ import annotations
 
+from core.errors import ConfigError
 from rig.camera_gphoto2 import GPhoto2Camera
 from rig.camera_opencv import OpenCVCamera
 from rig.camera_replay import ReplayCamera, ReplayLookup
@@ -19,7 +20,6 @@ from rig.config import (
     SimulatedCameraConfig,
 )
 from rig.devices import Camera, CameraTimeoutError, Frame, RigStateSource
-from rig.errors import ConfigError
 
 __all__ = [
     "Camera",

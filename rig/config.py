@@ -20,6 +20,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Literal
 
+from core.errors import ConfigError, InputError
 from rig.config_cameras import (
     CameraConfig,
     CameraFaultConfig,
@@ -31,7 +32,6 @@ from rig.config_cameras import (
     parse_camera,
 )
 from rig.config_schema import Table, dump_toml, read_toml
-from rig.errors import ConfigError, InputError
 from rig.pose import REQUIRED_ROLES, ROLES, RigPose
 from rig.safety import ForbiddenZone, SafetyConfig, parse_safety, pose_violation, safety_to_dict
 

@@ -12,8 +12,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from typing import Any, Literal
 
+from core.errors import ConfigError
 from rig.config_schema import Table
-from rig.errors import ConfigError
 
 __all__ = [
     "CAMERA_BACKENDS",

@@ -17,7 +17,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
-from rig.errors import ConfigError
+from core.errors import ConfigError
 
 __all__ = ["Table", "dump_toml", "read_toml"]
 

@@ -22,7 +22,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.errors import DeviceError, InputError, RigError
+from core.errors import DeviceError, InputError, RigError
 from rig.pose import RigPose
 
 __all__ = [
@@ -107,7 +107,7 @@ class Camera(Protocol):
 
         Frames buffered before the call (before the last move or light change) are never
         returned. Raises :class:`CameraTimeoutError` when no frame arrives in time and
-        :class:`~rig.errors.DeviceError` for other faults.
+        :class:`~core.errors.DeviceError` for other faults.
         """
         ...
 

@@ -11,8 +11,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+from core.errors import RigError
 from rig.devices import Camera
-from rig.errors import RigError
 from rig.hardware import LightGantry, Rig, ServoArm
 from rig.pose import RigPose
 from rig.safety import pose_violation

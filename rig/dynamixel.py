@@ -29,10 +29,10 @@ from dynamixel_sdk import (
     PortHandler,
 )
 
+from core.errors import ConfigError, DeviceError, ProtocolError, RigError, SafetyError
 from rig import dynamixel_table as tbl
 from rig.devices import close_after
 from rig.dynamixel_table import Item
-from rig.errors import ConfigError, DeviceError, ProtocolError, RigError, SafetyError
 
 __all__ = ["DynamixelChain", "ServoAxisConfig", "ServoHardwareError"]
 

@@ -7,7 +7,7 @@ Safety rules it keeps:
 
 - every line is validated (printable ASCII, no ``%``, no real-time characters, no newline inside)
   before a byte is written (:func:`rig.grbl_protocol.validate_command`);
-- targets outside the configured soft limits raise :class:`~rig.errors.SafetyError` before a byte
+- targets outside the configured soft limits raise :class:`~core.errors.SafetyError` before a byte
   is written;
 - moves go to *machine* coordinates (``G90 G53 G1``), so a stray ``G92`` or work offset left on
   the controller cannot shift them; the axis offsets of :class:`GantryAxisConfig` are the one
@@ -29,7 +29,7 @@ from typing import Any, Literal
 
 import serial
 
-from rig.errors import ConfigError, DeviceError, InputError, ProtocolError, RigError, SafetyError
+from core.errors import ConfigError, DeviceError, InputError, ProtocolError, RigError, SafetyError
 from rig.grbl_protocol import (
     GrblStatus,
     Reply,

@@ -19,7 +19,7 @@ import re
 from dataclasses import dataclass
 from enum import Enum
 
-from rig.errors import InputError
+from core.errors import InputError
 
 __all__ = [
     "ALARM_CODES",

@@ -19,10 +19,10 @@ from collections.abc import Mapping
 from dataclasses import replace
 from types import TracebackType
 
+from core.errors import DeviceError, InputError, RigError
 from rig.config import XM430_W350, AxisConfig, RigConfig
 from rig.devices import Camera, Frame, LightState, close_after
 from rig.dynamixel import DynamixelChain, ServoAxisConfig
-from rig.errors import DeviceError, InputError, RigError
 from rig.grbl import GantryAxes, GantryAxisConfig, GrblGantry
 from rig.pose import RigPose
 from rig.safety import check_path, check_pose, path_violation, pose_violation

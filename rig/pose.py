@@ -12,7 +12,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from rig.errors import InputError
+from core.errors import InputError
 
 __all__ = ["CAMERA_ROLES", "LIGHT_ROLES", "OPTIONAL_ROLES", "REQUIRED_ROLES", "ROLES", "RigPose"]
 

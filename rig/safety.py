@@ -18,9 +18,9 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from core.directions import angle_between, direction_from_angles_deg
+from core.errors import ConfigError, SafetyError
 from rig.config_schema import Table
-from rig.directions import angle_between, direction_from_angles_deg
-from rig.errors import ConfigError, SafetyError
 from rig.pose import RigPose
 
 if TYPE_CHECKING:

@@ -1,6 +1,6 @@
 """The simulator's calibration scenes, rendered per pixel by ray casting.
 
-Three targets, each seen by a :class:`rig.camera_model.PinholeCamera` (optionally through a lens
+Three targets, each seen by a :class:`core.camera_model.PinholeCamera` (optionally through a lens
 with radial distortion, OpenCV's ``k1, k2`` model) and returned as linear float32 radiance
 ``(H, W, 3)``:
 
@@ -15,7 +15,7 @@ Rays are cast through every pixel analytically (no point clouds), so edges are c
 whose neighbourhood is not uniform are supersampled (box filter, as a sensor pixel integrates).
 :func:`record` passes radiance through the sensor model to 16-bit linear or 8-bit sRGB pixels.
 
-Pixel convention (``rig.camera_model``): pixel (row i, col j) covers [j, j + 1) x [i, i + 1) in
+Pixel convention (``core.camera_model``): pixel (row i, col j) covers [j, j + 1) x [i, i + 1) in
 continuous (col, row) coordinates, principal point at (W / 2, H / 2). Distortion acts on the
 normalised coordinates of OpenCV's camera frame (x right, y down): a ray of undistorted
 normalised coordinates (x, y) lands at ``(x, y) (1 + k1 r^2 + k2 r^4)``, r^2 = x^2 + y^2.
@@ -32,9 +32,9 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from rig.camera_model import PinholeCamera
-from rig.directions import normalize
-from rig.errors import InputError
+from core.camera_model import PinholeCamera
+from core.directions import normalize
+from core.errors import InputError
 from sim.sensor import Sensor, expose, to_linear16, to_srgb8
 
 __all__ = [

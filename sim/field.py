@@ -2,7 +2,7 @@
 
 For every light t (directional, unit irradiance) and camera s, the radiance of every surface
 sample toward the camera, and each camera's visibility mask, written to the store of
-:mod:`rig.field_store`. Each light's shadow map is computed once and reused for every camera.
+:mod:`core.field_store`. Each light's shadow map is computed once and reused for every camera.
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from datetime import UTC, datetime
 import numpy as np
 from tqdm import tqdm
 
-from rig.camera_model import PinholeCamera
-from rig.directions import angles_deg_from_direction, hemisphere_layout
-from rig.field_store import FieldStoreWriter
+from core.camera_model import PinholeCamera
+from core.directions import angles_deg_from_direction, hemisphere_layout
+from core.field_store import FieldStoreWriter
 from sim.scenes import build_scene, get_scene
 from sim.synthetic_camera import (
     DirectionalLight,

@@ -23,9 +23,9 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from rig.camera_model import PinholeCamera
-from rig.directions import panorama_directions, panorama_solid_angles
-from rig.errors import InputError
+from core.camera_model import PinholeCamera
+from core.directions import panorama_directions, panorama_solid_angles
+from core.errors import InputError
 from sim.materials import specular_lobe
 from sim.scenes import SurfaceSamples
 from sim.synthetic_camera import DirectionalLight, SyntheticImage, image_of_points, light_visibility

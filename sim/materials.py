@@ -27,7 +27,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from rig.errors import InputError
+from core.errors import InputError
 
 __all__ = ["Material", "brdf", "ggx_distribution", "smith_g1", "specular_lobe"]
 

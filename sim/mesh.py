@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rig.errors import InputError
+from core.errors import InputError
 from sim.materials import Material
 from sim.scenes import MAX_POINTS, SurfaceSamples, uniform_material
 

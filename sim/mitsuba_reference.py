@@ -1,7 +1,7 @@
 """An independent check of the ground truth: the same scene rendered by Mitsuba 3.
 
 :func:`render_reference` rebuilds a sphere scene of :mod:`sim.scenes` in Mitsuba 3 and renders
-it under an equirectangular panorama, seen by a :class:`rig.camera_model.PinholeCamera`, on the
+it under an equirectangular panorama, seen by a :class:`core.camera_model.PinholeCamera`, on the
 same pixel grid as :func:`sim.ground_truth.render_environment` (row 0 at the top, not
 mirrored). Mitsuba is an optional extra (``pip install -e '.[reference]'``) imported only when a
 function here runs.
@@ -89,8 +89,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.camera_model import PinholeCamera
-from rig.errors import InputError, RigError
+from core.camera_model import PinholeCamera
+from core.errors import InputError, RigError
 from sim.scenes import SceneSpec, get_scene
 
 __all__ = [

@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.directions import fibonacci_sphere
-from rig.errors import InputError
+from core.directions import fibonacci_sphere
+from core.errors import InputError
 from sim.materials import Material
 
 __all__ = ["MAX_POINTS", "SCENES", "SceneSpec", "SurfaceSamples", "build_scene", "get_scene"]

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.colour import linear_to_srgb
-from rig.errors import InputError
+from core.colour import linear_to_srgb
+from core.errors import InputError
 
 __all__ = [
     "BAYER_PATTERNS",

@@ -18,8 +18,8 @@ import numpy as np
 import tifffile
 from numpy.typing import NDArray
 
-from rig.atomic import atomic_path
-from rig.errors import InputError
+from core.atomic import atomic_path
+from core.errors import InputError
 from sim.sensor import BAYER_PATTERNS, Sensor, bayer_mosaic, expose, to_linear16, to_srgb8
 
 __all__ = [

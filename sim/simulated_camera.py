@@ -32,11 +32,11 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.camera_model import PinholeCamera
+from core.camera_model import PinholeCamera
+from core.directions import angles_deg_from_direction, direction_from_angles_deg
+from core.errors import DeviceError, InputError
 from rig.config_cameras import SIMULATED_OUTPUTS, CameraFaultConfig, SimulatedCameraConfig
 from rig.devices import CameraTimeoutError, Frame, LightState, RigStateSource, frame_metadata
-from rig.directions import angles_deg_from_direction, direction_from_angles_deg
-from rig.errors import DeviceError, InputError
 from rig.pose import RigPose
 from sim.calibration_targets import (
     DiscLight,
@@ -107,7 +107,7 @@ class SimulatedCamera:
     state : callable
         Returns the rig's current ``(RigPose, LightState)``.
     scene, points : the synthetic object (``rig sim scenes``) and its number of surface points
-    distance, fov_deg, width, height : the camera (see :class:`rig.camera_model.PinholeCamera`)
+    distance, fov_deg, width, height : the camera (see :class:`core.camera_model.PinholeCamera`)
     light_distance : float, optional
         Point light at this distance from the origin; a directional light when None.
     output : {"linear16", "srgb8", "dng"}

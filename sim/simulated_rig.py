@@ -12,21 +12,42 @@ from __future__ import annotations
 import dataclasses
 from types import TracebackType
 
+from core.errors import InputError
 from rig.config import RigConfig, simulated_config
 from rig.config_cameras import SimulatedCameraConfig
 from rig.devices import LightState
-from rig.errors import InputError
 from rig.hardware import Rig, servo_axis
 from rig.pose import RigPose
 from sim.dynamixel_emulator import FaultConfig, ServoChainEmulator, ServoSpec
 from sim.grbl_emulator import GrblEmulator, GrblFaults
 from sim.simulated_camera import SimulatedCamera
 
-__all__ = ["SimulatedRig", "simulated_camera"]
+__all__ = ["SimulatedRig", "simulated_camera", "simulated_capture_config"]
 
 #: GRBL settings of the emulated gantry before the config's axes are applied: max rates
 #: ($110-$112, units/min) high enough that the driver's feed limits a move.
 GANTRY_SETTINGS: dict[int, float] = {110: 360_000.0, 111: 360_000.0, 112: 360_000.0}
+
+
+def simulated_capture_config(
+    scene: str, *, size: int = 128, points: int = 20_000, speed: float = 1.0
+) -> RigConfig:
+    """The simulated rig's config for a capture: the scene, image size and axis speeds."""
+    if not speed > 0:
+        raise InputError(f"the axis speed factor must be positive, got {speed}")
+    base = simulated_config("/dev/null", "/dev/null", scene=scene)
+    axes = {
+        role: dataclasses.replace(
+            axis,
+            velocity_deg_s=axis.velocity_deg_s * speed,
+            acceleration_deg_s2=axis.acceleration_deg_s2 * speed**2,
+            feed_deg_min=axis.feed_deg_min * speed,
+        )
+        for role, axis in base.axes.items()
+    }
+    assert isinstance(base.camera, SimulatedCameraConfig)
+    camera = dataclasses.replace(base.camera, width=size, height=size, points=points)
+    return dataclasses.replace(base, axes=axes, camera=camera)
 
 
 def _servo_ticks(config: RigConfig, role: str, degrees: float) -> int:

@@ -13,13 +13,13 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from rig.colour import linear_to_srgb, luminance, srgb_to_linear
-from rig.directions import (
+from core.colour import linear_to_srgb, luminance, srgb_to_linear
+from core.directions import (
     direction_from_angles_deg,
     panorama_directions,
     panorama_solid_angles,
 )
-from rig.errors import InputError
+from core.errors import InputError
 
 __all__ = ["SUN_DIAMETER_DEG", "ldr_photo", "procedural_sky"]
 

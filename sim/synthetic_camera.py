@@ -21,9 +21,9 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from rig.camera_model import PinholeCamera
-from rig.errors import InputError
-from rig.splat import (
+from core.camera_model import PinholeCamera
+from core.errors import InputError
+from core.splat import (
     SPLAT_RADIUS,
     blend_splats,
     camera_splats,

@@ -4,15 +4,20 @@ from pathlib import Path
 
 import pytest
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
-PANORAMAS = SHARED / "panoramas"
+from core.sample_data import panorama_path, rti_capture_path
 
 
 @pytest.fixture(scope="session")
 def courtyard_path() -> Path:
-    return PANORAMAS / "courtyard.exr"
+    return panorama_path("courtyard")
 
 
 @pytest.fixture(scope="session")
 def studio_path() -> Path:
-    return PANORAMAS / "studio.exr"
+    return panorama_path("studio")
+
+
+@pytest.fixture(scope="session")
+def rti_lp_path() -> Path:
+    """The bundled real RTI capture's .lp file (240 lights)."""
+    return rti_capture_path()

@@ -20,7 +20,7 @@ from capture.dataset import (
     ImageKey,
     ImageRecord,
 )
-from rig.errors import DatasetError, InputError
+from core.errors import DatasetError, InputError
 
 POSE = {
     "camera_azimuth_deg": 30.0,

@@ -24,7 +24,7 @@ from capture.journal import (
     read_journal,
     runs,
 )
-from rig.errors import DatasetError, InputError
+from core.errors import DatasetError, InputError
 
 ROOT = Path(__file__).resolve().parents[2]
 

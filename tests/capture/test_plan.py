@@ -23,9 +23,9 @@ from capture.plan import (
     parse_plan,
 )
 from capture.plan_order import move_seconds
+from core.directions import direction_from_angles_deg
+from core.errors import InputError
 from rig.config import AxisConfig, LightConfig, RigConfig, simulated_config
-from rig.directions import direction_from_angles_deg
-from rig.errors import InputError
 from rig.hardware import _move_seconds
 from rig.pose import RigPose
 from rig.safety import ForbiddenZone, SafetyConfig, path_violation, pose_violation

@@ -14,19 +14,18 @@ from typing import Any
 
 import pytest
 
+from app.cli import main
 from capture.dataset import Dataset
 from capture.journal import read_journal
 from capture.plan import SweepPlan, grid_plan
 from capture.session import CaptureSession, SessionResult, SessionState
-from rig.cli import main
-from rig.cli_capture import simulated_capture_config
+from core.errors import DeviceError
 from rig.config import RigConfig
 from rig.config_cameras import CameraFaultConfig
-from rig.errors import DeviceError
 from rig.hardware import Rig
 from sim.dynamixel_emulator import FaultConfig
 from sim.grbl_emulator import GrblFaults
-from sim.simulated_rig import SimulatedRig
+from sim.simulated_rig import SimulatedRig, simulated_capture_config
 
 SIM = ["--sim", "--cameras", "2", "--lights", "5", "--size", "32", "--points", "1500",
        "--speed", "20", "--quiet"]  # fmt: skip
@@ -200,7 +199,7 @@ def _kill_at(tmp: Path, events: int) -> Path:
     """Run `rig capture --sim` in a child and SIGKILL it once ``events`` images are journaled."""
     path = tmp / f"killed-{events}"
     child = subprocess.Popen(
-        [sys.executable, "-m", "rig.cli", "capture", *SIM, "-o", str(path)],
+        [sys.executable, "-m", "app.cli", "capture", *SIM, "-o", str(path)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )

@@ -7,15 +7,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from capture.calibration_plan import with_calibration_captures
 from capture.dataset import Dataset
 from capture.plan import CaptureEvent, SweepPlan, grid_plan
 from capture.session import CaptureSession
-from rig.cli_capture import simulated_calibration, simulated_capture_config
+from core.errors import InputError
 from rig.config import RigConfig
 from rig.devices import Frame, LightState, frame_metadata
-from rig.errors import InputError
 from rig.pose import RigPose
 from sim.simulated_camera import TARGETS, SimulatedCamera
+from sim.simulated_rig import simulated_capture_config
 
 
 class FakeRig:
@@ -49,7 +50,7 @@ class FakeRig:
 
 def _setup(tmp_path: Path) -> tuple[RigConfig, SweepPlan, Dataset]:
     config = simulated_capture_config("glossy-sphere", size=32, points=500, speed=20.0)
-    plan = simulated_calibration(grid_plan(2, 5, layout="grid"), config)
+    plan = with_calibration_captures(grid_plan(2, 5, layout="grid"), config)
     dataset = Dataset.create(
         tmp_path / "d",
         rig_config=config.to_dict(),

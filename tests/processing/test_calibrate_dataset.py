@@ -15,16 +15,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from app.cli import main
+from app.cli_calibrate import add_calibrate
+from app.cli_process import add_process
 from capture.dataset import Dataset
+from core.camera_model import RigCamera
+from core.directions import direction_from_angles_deg
+from core.errors import DatasetError
 from processing.calibrate_dataset import DEFAULT_BOARD, DEFAULT_SPHERE, calibrate_dataset
 from processing.calibration import Calibration
-from processing.field_builder import RigCamera
 from processing.reflectance_field import ReflectanceField
-from rig.cli import main
-from rig.cli_calibrate import add_calibrate
-from rig.cli_process import add_process
-from rig.directions import direction_from_angles_deg
-from rig.errors import DatasetError
 from sim import simulated_camera
 
 #: Tolerances (measured: direction <= 0.18 deg, orientation <= 0.21 deg, distance <= 0.004 of

@@ -8,6 +8,9 @@ import json
 import numpy as np
 import pytest
 
+from core.camera_model import PinholeCamera
+from core.directions import angle_between, direction_from_angles_deg, hemisphere_layout
+from core.errors import DatasetError, InputError
 from processing.calibration import (
     CalibratedCamera,
     Calibration,
@@ -17,9 +20,6 @@ from processing.calibration import (
 from processing.charuco import ChArUcoTarget, board_extrinsics, calibrate_intrinsics
 from processing.light_falloff import WhiteReference, light_intensity_and_falloff
 from processing.light_probe import MirrorSphere, light_directions_from_mirror_sphere
-from rig.camera_model import PinholeCamera
-from rig.directions import angle_between, direction_from_angles_deg, hemisphere_layout
-from rig.errors import DatasetError, InputError
 from sim.calibration_targets import (
     BoardPlacement,
     DiscLight,

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
+from core.colour import srgb_to_linear
 from processing.decode import DecodedImage, DecodeError, decode_image
 from processing.hdr import Exposure, hat, merge_exposures
 from processing.panorama import write_exr_rgba
-from rig.colour import srgb_to_linear
 from sim.sensor import Sensor, bayer_mosaic, expose, linear_from_dn, to_linear16, to_srgb8
 from sim.sensor_files import write_dng, write_linear16_tiff, write_srgb8
 

@@ -12,18 +12,15 @@ import pytest
 from numpy.typing import NDArray
 
 from capture.dataset import Dataset, ImageKey
+from core.camera_model import RigCamera
+from core.directions import angles_deg_from_direction, hemisphere_layout
+from core.errors import DatasetError
 from processing.decode import DecodeError
-from processing.field_builder import (
-    PointCloud,
-    RigCamera,
-    build_field,
-    field_layout,
-    read_point_cloud,
-)
+from processing.field_builder import build_field
+from processing.field_layout import field_layout
+from processing.point_cloud import PointCloud, read_point_cloud
 from processing.reflectance_field import ReflectanceField
 from rig.devices import LightState
-from rig.directions import angles_deg_from_direction, hemisphere_layout
-from rig.errors import DatasetError
 from rig.pose import RigPose
 from sim.field import field_cameras, simulate_field
 from sim.scenes import build_scene

@@ -5,9 +5,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from core.errors import InputError
 from processing import halftone_tables as tables
 from processing.halftone import DIFFUSION_METHODS, _trunc_div, error_diffuse, halftone
-from rig.errors import InputError
 
 
 def test_table_sizes_and_sums() -> None:

@@ -6,6 +6,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import ConvexHull
 
+from core.directions import (
+    angle_between,
+    direction_from_angles_deg,
+    hemisphere_layout,
+    panorama_directions,
+)
+from core.errors import InputError
 from processing.interpolation import (
     METHODS,
     RBF_NEIGHBOURS,
@@ -13,13 +20,6 @@ from processing.interpolation import (
     interpolation_weights,
     mean_spacing_deg,
 )
-from rig.directions import (
-    angle_between,
-    direction_from_angles_deg,
-    hemisphere_layout,
-    panorama_directions,
-)
-from rig.errors import InputError
 
 LAYOUTS = [(layout, count) for layout in ("grid", "fibonacci") for count in (10, 30, 400)]
 

@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import SphericalVoronoi, cKDTree
 
+from core.directions import panorama_directions, panorama_solid_angles
 from processing.lights import disassemble_lights, nearest_sample_labels
-from rig.directions import panorama_directions, panorama_solid_angles
 
 
 def _directions(k: int, seed: int) -> np.ndarray:

@@ -6,9 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
+from core.colour import linear_to_srgb, srgb_to_linear
+from core.errors import PanoramaError
 from processing.panorama import adjust_panorama, panorama_from_array, read_panorama, write_panorama
-from rig.colour import linear_to_srgb, srgb_to_linear
-from rig.errors import PanoramaError
 
 
 def _image(h: int = 16) -> np.ndarray:

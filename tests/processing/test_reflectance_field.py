@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import zarr
 
+from core.errors import DatasetError, InputError
 from processing.reflectance_field import ReflectanceField
-from rig.errors import DatasetError, InputError
 from sim.field import field_cameras, simulate_field
 
 

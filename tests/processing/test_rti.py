@@ -9,6 +9,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+from core.camera_model import PinholeCamera
+from core.errors import DatasetError, InputError
+from core.sample_data import rti_capture_path
 from processing.panorama import read_image
 from processing.reflectance_field import ReflectanceField
 from processing.rti import (
@@ -21,21 +24,13 @@ from processing.rti import (
     rti_camera,
     write_lp,
 )
-from rig.camera_model import PinholeCamera
-from rig.errors import DatasetError, InputError
 
-SHARED = Path(__file__).resolve().parents[3] / "shared" / "data"
-LOEWENKOPF = SHARED / "rti" / "loewenkopf"
-LOEWENKOPF_LP = LOEWENKOPF / "dirs.lp"
-needs_loewenkopf = pytest.mark.skipif(
-    not LOEWENKOPF_LP.is_file(), reason=f"shared RTI data not found at {LOEWENKOPF}"
-)
+LOEWENKOPF_LP = rti_capture_path()
+LOEWENKOPF = LOEWENKOPF_LP.parent
 
 
 @pytest.fixture(scope="module")
 def loewenkopf(tmp_path_factory: pytest.TempPathFactory) -> ReflectanceField:
-    if not LOEWENKOPF_LP.is_file():
-        pytest.skip(f"shared RTI data not found at {LOEWENKOPF}")
     store = tmp_path_factory.mktemp("rti") / "loewenkopf.zarr"
     return import_rti(LOEWENKOPF_LP, store, progress=False)
 
@@ -61,7 +56,6 @@ def _small_capture(folder: Path, sizes: list[tuple[int, int]], grey: bool = Fals
 # --- .lp reading and writing ----------------------------------------------------------------
 
 
-@needs_loewenkopf
 def test_the_real_lp_file_has_240_unit_directions_over_the_upper_hemisphere() -> None:
     lights = read_lp(LOEWENKOPF_LP)
     assert len(lights) == 240 and lights.directions.shape == (240, 3)
@@ -263,7 +257,6 @@ def test_frame_functions_refuse_non_vectors() -> None:
 # --- import and export ---------------------------------------------------------------------
 
 
-@needs_loewenkopf
 def test_the_real_capture_imports_as_a_pixel_field(loewenkopf: ReflectanceField) -> None:
     field = ReflectanceField.open(loewenkopf.path)
     assert field.image_shape == (43, 64)
@@ -289,7 +282,6 @@ def test_the_real_capture_imports_as_a_pixel_field(loewenkopf: ReflectanceField)
     assert not list(loewenkopf.path.parent.glob(".*partial*"))
 
 
-@needs_loewenkopf
 def test_real_normals_are_integrable_only_in_the_stated_image_frame(
     loewenkopf: ReflectanceField,
 ) -> None:
@@ -314,7 +306,6 @@ def test_real_normals_are_integrable_only_in_the_stated_image_frame(
     assert stated < 0.8 * curl(1.0, -1.0)
 
 
-@needs_loewenkopf
 def test_export_lp_gives_back_the_real_file(loewenkopf: ReflectanceField, tmp_path: Path) -> None:
     original = read_lp(LOEWENKOPF_LP)
     written = export_lp(loewenkopf, 0, tmp_path / "out" / "dirs.lp", original.files)

@@ -5,6 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import DatasetError
+from core.sample_data import rti_capture_path
 from processing.reflectance_field import ReflectanceField
 from processing.rti import import_rti
 from processing.sample_model_store import (
@@ -14,10 +16,9 @@ from processing.sample_model_store import (
     write_sample_models,
 )
 from processing.sample_models import BasisFit, ParametricFit, SampleModels, fit_sample_models
-from rig.errors import DatasetError
 from sim.field import field_cameras, simulate_field
 
-RTI = Path(__file__).resolve().parents[3] / "shared" / "data" / "rti" / "loewenkopf" / "dirs.lp"
+RTI = rti_capture_path()
 
 
 def _simulated(tmp: Path, name: str, points: int, scene: str = "glossy-sphere") -> ReflectanceField:

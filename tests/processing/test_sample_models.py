@@ -6,6 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.camera_model import PinholeCamera
+from core.directions import direction_from_angles_deg, hemisphere_layout
+from core.errors import DatasetError, InputError
+from core.field_store import FieldStoreWriter
 from processing.reflectance_field import ReflectanceField
 from processing.sample_models import (
     BasisFit,
@@ -22,10 +26,6 @@ from processing.sample_models import (
     shadow_mark_errors,
     with_geometric_visibility,
 )
-from rig.camera_model import PinholeCamera
-from rig.directions import direction_from_angles_deg, hemisphere_layout
-from rig.errors import DatasetError, InputError
-from rig.field_store import FieldStoreWriter
 from sim.field import field_cameras, simulate_field
 from sim.materials import specular_lobe
 from sim.scenes import build_scene

@@ -3,9 +3,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from core.directions import angle_between, panorama_directions, panorama_row_solid_angles
+from core.errors import InputError
 from processing.sampling import SAMPLERS, sample_environment, sampling_density
-from rig.directions import angle_between, panorama_directions, panorama_row_solid_angles
-from rig.errors import InputError
 
 
 def _sky(h: int = 64) -> np.ndarray:

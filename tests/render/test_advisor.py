@@ -5,13 +5,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import InputError
 from processing.panorama import Panorama, read_panorama
 from processing.reflectance_field import ReflectanceField
 from render.advisor import Advice, Advisor, Candidate, capture_density
 from render.model_relight import ModelRelightSettings
 from render.relight_mode import open_relighter
 from render.relighter import RelightSettings
-from rig.errors import InputError
 from sim.field import field_cameras, simulate_field
 from sim.ground_truth import environment_lights, shade_environment
 from sim.scenes import build_scene

@@ -5,6 +5,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.camera_model import PinholeCamera
+from core.directions import hemisphere_layout
+from core.field_store import FieldStoreWriter
 from processing.panorama import read_panorama
 from processing.reflectance_field import ReflectanceField
 from processing.sample_models import fit_sample_models
@@ -21,9 +24,6 @@ from render.guards import (
     sun_warning,
     view_warning,
 )
-from rig.camera_model import PinholeCamera
-from rig.directions import hemisphere_layout
-from rig.field_store import FieldStoreWriter
 from sim.field import field_cameras, simulate_field
 from sim.scenes import build_scene
 from sim.skies import ldr_photo, procedural_sky

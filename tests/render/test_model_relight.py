@@ -6,6 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.camera_model import PinholeCamera
+from core.directions import hemisphere_layout, panorama_solid_angles
+from core.errors import InputError
+from core.field_store import FieldStoreWriter
 from processing.panorama import panorama_from_array
 from processing.reflectance_field import ReflectanceField
 from processing.sample_models import (
@@ -26,10 +30,6 @@ from render.model_relight import (
     sampled_lights,
 )
 from render.relighter import Relighter, RelightSettings
-from rig.camera_model import PinholeCamera
-from rig.directions import hemisphere_layout, panorama_solid_angles
-from rig.errors import InputError
-from rig.field_store import FieldStoreWriter
 from sim.field import field_cameras, simulate_field
 from sim.ground_truth import environment_lights, render_environment, shade_environment
 from sim.scenes import build_scene

@@ -5,6 +5,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.camera_model import PinholeCamera
+from core.directions import hemisphere_layout
+from core.errors import InputError
+from core.field_store import FieldStoreWriter
 from processing.lights import LightSet
 from processing.panorama import panorama_from_array
 from processing.reflectance_field import ReflectanceField
@@ -15,10 +19,6 @@ from render.light_weights import (
 )
 from render.relight import blend_cameras, relight, relight_pixels_literal
 from render.relighter import Relighter, RelightSettings
-from rig.camera_model import PinholeCamera
-from rig.directions import hemisphere_layout
-from rig.errors import InputError
-from rig.field_store import FieldStoreWriter
 from sim.field import field_cameras, simulate_field
 
 

@@ -5,15 +5,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.camera_model import PinholeCamera
+from core.directions import hemisphere_layout
+from core.field_store import FieldStoreWriter
 from processing.panorama import read_panorama
 from processing.reflectance_field import ReflectanceField
 from processing.sample_model_store import default_models_path
 from render.model_relight import ModelRelighter, ModelRelightSettings
 from render.relight_mode import MOST_ACCURATE_MODELS, most_accurate_mode, open_relighter
 from render.relighter import Relighter, RelightSettings
-from rig.camera_model import PinholeCamera
-from rig.directions import hemisphere_layout
-from rig.field_store import FieldStoreWriter
 from sim.field import field_cameras, simulate_field
 
 

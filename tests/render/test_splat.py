@@ -3,9 +3,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from render.splat import plan_splats, point_spacing, splat
-from rig.camera_model import PinholeCamera
-from rig.errors import InputError
+from core.camera_model import PinholeCamera
+from core.errors import InputError
+from core.point_spacing import point_spacing
+from render.splat import plan_splats, splat
 from sim.scenes import build_scene
 from sim.synthetic_camera import image_of_points
 

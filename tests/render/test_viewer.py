@@ -3,10 +3,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from core.camera_model import PinholeCamera
+from core.errors import InputError
 from render.splat import plan_splats, splat
 from render.viewer import pyvista_picture
-from rig.camera_model import PinholeCamera
-from rig.errors import InputError
 from sim.scenes import build_scene
 
 

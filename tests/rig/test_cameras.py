@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
+from core.errors import ConfigError, DeviceError, InputError
 from rig.camera_gphoto2 import GPhoto2Camera, shutter_seconds
 from rig.camera_opencv import OpenCVCamera, exposure_from_property, exposure_to_property
 from rig.camera_replay import ReplayCamera
@@ -23,7 +24,6 @@ from rig.config import (
     simulated_config,
 )
 from rig.devices import Camera, CameraTimeoutError, Frame, LightState
-from rig.errors import ConfigError, DeviceError, InputError
 from rig.pose import RigPose
 
 FRAMES = 8

@@ -8,6 +8,7 @@ from typing import Any
 
 import pytest
 
+from core.errors import ConfigError, InputError
 from rig.config import (
     AxisConfig,
     OpenCVCameraConfig,
@@ -17,7 +18,6 @@ from rig.config import (
     simulated_config,
 )
 from rig.config_schema import dump_toml
-from rig.errors import ConfigError, InputError
 from rig.pose import RigPose
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "rig.example.toml"

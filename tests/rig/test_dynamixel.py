@@ -9,8 +9,8 @@ from dataclasses import dataclass, replace
 
 import pytest
 
+from core.errors import ConfigError, DeviceError, ProtocolError, SafetyError
 from rig.dynamixel import DynamixelChain, ServoAxisConfig, ServoHardwareError
-from rig.errors import ConfigError, DeviceError, ProtocolError, SafetyError
 from sim.dynamixel_emulator import (
     FaultConfig,
     ServoChainEmulator,

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rig.errors import DeviceError, InputError, ProtocolError, SafetyError
+from core.errors import DeviceError, InputError, ProtocolError, SafetyError
 from rig.grbl import (
     GantryAxes,
     GantryAxisConfig,

@@ -6,8 +6,8 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
+from core.errors import DeviceError, SafetyError
 from rig.config import simulated_config
-from rig.errors import DeviceError, SafetyError
 from rig.hardware import servo_axis
 from rig.pose import RigPose
 from sim.dynamixel_emulator import FaultConfig

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from core.errors import ConfigError, SafetyError
 from rig.config import RigConfig, load_config
-from rig.errors import ConfigError, SafetyError
 from rig.pose import RigPose
 from rig.safety import (
     ForbiddenZone,

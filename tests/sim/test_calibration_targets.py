@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from core.camera_model import PinholeCamera
+from core.errors import InputError
 from processing.charuco import ChArUcoTarget, detect_board
-from rig.camera_model import PinholeCamera
-from rig.errors import InputError
 from sim.calibration_targets import (
     BoardPlacement,
     DiscLight,

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import zarr
 
-from rig.cli import main
-from rig.directions import hemisphere_layout
-from rig.errors import InputError
+from app.cli import main
+from core.directions import hemisphere_layout
+from core.errors import InputError
 from sim.field import field_cameras, simulate_field
 from sim.scenes import build_scene
 from sim.synthetic_camera import DirectionalLight, render_under_light

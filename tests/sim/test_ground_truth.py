@@ -8,9 +8,9 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from rig.camera_model import PinholeCamera
-from rig.cli import main
-from rig.directions import panorama_solid_angles
+from app.cli import main
+from core.camera_model import PinholeCamera
+from core.directions import panorama_solid_angles
 from sim.ground_truth import environment_lights, render_environment, shade_environment
 from sim.materials import brdf
 from sim.scenes import build_scene
@@ -56,10 +56,10 @@ def test_white_furnace(grid: int | None, tolerance: float) -> None:
 
 
 def test_prefilter_error_is_small_against_exact() -> None:
+    from core.sample_data import panorama_path
     from processing.panorama import read_panorama
-    from rig.demo import bundled_panorama_path
 
-    full = read_panorama(bundled_panorama_path()).rgb
+    full = read_panorama(panorama_path("courtyard")).rgb
     pano = cv2.resize(full, (128, 64), interpolation=cv2.INTER_AREA)
     glossy = build_scene("glossy-sphere", 20_000)
     camera = PinholeCamera(20.0, 70.0, 4.0, 40.0, 96, 96)

@@ -5,8 +5,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from rig.directions import direction_from_angles_deg, panorama_directions, panorama_solid_angles
-from rig.errors import InputError
+from core.directions import direction_from_angles_deg, panorama_directions, panorama_solid_angles
+from core.errors import InputError
 from sim.materials import Material, brdf, ggx_distribution
 
 UP = np.array([0.0, 0.0, 1.0])

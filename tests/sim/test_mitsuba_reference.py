@@ -28,14 +28,14 @@ import pytest
 from numpy.typing import NDArray
 from scipy.ndimage import binary_erosion
 
-from processing.panorama import downsample_panorama, read_panorama
-from rig.camera_model import PinholeCamera
-from rig.directions import (
+from core.camera_model import PinholeCamera
+from core.directions import (
     direction_from_angles_deg,
     panorama_directions,
     panorama_pixel_index,
 )
-from rig.errors import RigError
+from core.errors import RigError
+from processing.panorama import downsample_panorama, read_panorama
 from sim.ground_truth import render_environment
 from sim.mitsuba_reference import (
     ENVMAP_TO_RIG,

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rig.cli import main
-from rig.errors import InputError
+from app.cli import main
+from core.errors import InputError
 from sim.materials import Material
 from sim.mesh import sample_mesh
 from sim.scenes import SCENES, TORUS_MAJOR, TORUS_MINOR, build_scene

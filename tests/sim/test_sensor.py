@@ -8,8 +8,8 @@ import pytest
 import rawpy
 import tifffile
 
-from rig.cli import main
-from rig.errors import InputError
+from app.cli import main
+from core.errors import InputError
 from sim.sensor import (
     Sensor,
     auto_exposure_time,

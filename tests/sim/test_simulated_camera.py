@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import rawpy
 
+from core.errors import DeviceError, InputError
 from rig.config import CameraFaultConfig, simulated_config
 from rig.config_cameras import SimulatedCameraConfig
 from rig.devices import Camera, CameraTimeoutError, LightState
-from rig.errors import DeviceError, InputError
 from rig.pose import RigPose
 from sim.sensor import Sensor
 from sim.simulated_camera import SimulatedCamera, capture_seed

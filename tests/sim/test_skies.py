@@ -3,10 +3,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from core.colour import REC709_LUMINANCE
+from core.directions import direction_from_angles_deg, panorama_directions, panorama_solid_angles
+from core.errors import InputError
 from render.guards import clipped_panorama_warning
-from rig.colour import REC709_LUMINANCE
-from rig.directions import direction_from_angles_deg, panorama_directions, panorama_solid_angles
-from rig.errors import InputError
 from sim.skies import ldr_photo, procedural_sky
 
 

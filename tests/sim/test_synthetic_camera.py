@@ -3,9 +3,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rig.camera_model import PinholeCamera
-from rig.directions import direction_from_angles_deg
-from rig.errors import InputError
+from core.camera_model import PinholeCamera
+from core.directions import direction_from_angles_deg
+from core.errors import InputError
 from sim.materials import brdf
 from sim.scenes import TORUS_MAJOR, TORUS_MINOR, build_scene
 from sim.synthetic_camera import (

@@ -1,0 +1,602 @@
+"""The ``rig`` command line: thin sub-commands over library functions.
+
+This module and :mod:`app.demo` are the application layer: they may import every package
+(lazily, so ``rig --help`` stays fast); the library packages keep to the boundaries of
+``docs/architecture.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from app.cli_advise import add_advise
+from app.cli_bench import add_bench_parser
+from app.cli_calibrate import add_calibrate
+from app.cli_capture import add_capture
+from app.cli_plan import add_plan
+from app.cli_process import add_process
+from app.cli_rig import add_doctor, add_sim_start
+from core.errors import RigError
+
+__all__ = ["build_parser", "main"]
+
+
+def _add_sample(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from processing.sampling import SAMPLERS
+
+    p = commands.add_parser(
+        "sample",
+        help="importance-sample a panorama and disassemble its light into K lights",
+        description="Sample an equirectangular panorama into K light directions, gather all its "
+        "light into their spherical Voronoi cells, and write lights.json, overlay.png and "
+        "lights.png to the output directory.",
+    )
+    p.add_argument("panorama", type=Path, help="panorama file (.exr, .hdr, .png, .jpg)")
+    p.add_argument("-k", type=int, default=64, help="number of lights (default 64)")
+    p.add_argument("--method", choices=SAMPLERS, default="tmed", help="sampler (default tmed)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument(
+        "--exact",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="return exactly K samples (default on)",
+    )
+    p.add_argument(
+        "--paper", action="store_true", help="diffuse plain pixel luminance, as the paper"
+    )
+    p.add_argument("--modulation", type=Path, help="image multiplying the sampling density")
+    p.add_argument("--yaw", type=float, default=0.0, help="rotate the environment, degrees CCW")
+    p.add_argument("--exposure", type=float, default=1.0, help="radiance scale (default 1)")
+    p.add_argument("--resample", action="store_true", help="resize a panorama that is not 2:1")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output directory")
+    p.set_defaults(handler=_run_sample)
+
+
+def _run_sample(args: argparse.Namespace) -> int:
+    from processing.environment import LightingControls, read_modulation_map
+    from processing.panorama import read_panorama
+    from render.lighting_outputs import write_lighting_outputs
+
+    panorama = read_panorama(args.panorama, resample=args.resample)
+    controls = LightingControls(
+        k=args.k,
+        method=args.method,
+        seed=args.seed,
+        exact=args.exact,
+        paper=args.paper,
+        modulation=None if args.modulation is None else read_modulation_map(args.modulation),
+        yaw_deg=args.yaw,
+        exposure=args.exposure,
+    )
+    lighting = write_lighting_outputs(panorama, controls, args.output)
+    lights = lighting.lights
+    print(
+        f"{lights.k} lights ({controls.method}) from {panorama.source} "
+        f"({panorama.width}x{panorama.height}); total light "
+        f"{lights.rgb.sum(axis=0).round(4).tolist()} (RGB radiance x sr) -> {args.output}/"
+    )
+    return 0
+
+
+def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from processing.interpolation import METHODS
+    from processing.sample_models import MODELS
+    from processing.sampling import SAMPLERS
+    from render.relight_mode import MOST_ACCURATE_MODELS
+    from render.relighter import SCHEMES
+
+    p = commands.add_parser(
+        "relight",
+        help="relight a reflectance field under a panorama",
+        description="Relight a reflectance field store (rig sim field, or an imported RTI "
+        "capture) under an environment panorama and render a view. The suffix of -o picks the "
+        "output: .exr (linear RGB + coverage alpha), .png (tone-mapped), .gif/.mp4 (a sequence: "
+        "see --sequence).",
+    )
+    p.add_argument(
+        "field", type=Path, help="reflectance field store, or an RTI .lp file (or its folder)"
+    )
+    p.add_argument("--env", type=Path, required=True, help="panorama file")
+    p.add_argument("--scheme", choices=(*SCHEMES, "model"), help="how the panorama lights the "
+                   "field; model: through per-sample models fitted to it (default: the most "
+                   "accurate, chosen by leave-one-light-out error)")  # fmt: skip
+    p.add_argument("-k", type=int, help="sampled lights (default 64; scheme model: sample K "
+                   "lights instead of the panorama's grid)")  # fmt: skip
+    p.add_argument("--model", choices=("auto", "auto-per-sample", *MODELS), default="auto",
+                   help="scheme model: the model (default: by leave-one-light-out)")  # fmt: skip
+    p.add_argument("--grid", type=int, default=MOST_ACCURATE_MODELS.grid_height,
+                   help="scheme model: the panorama summed into GRID x 2 GRID lights (default "
+                   f"{MOST_ACCURATE_MODELS.grid_height})")  # fmt: skip
+    p.add_argument("--models", type=Path, help="saved fit of the field (default: FIELD.models.npz "
+                   "beside the store; fitted and saved there when missing)")  # fmt: skip
+    p.add_argument("--sampler", choices=SAMPLERS, default="tmed", help="sampler (default tmed)")
+    p.add_argument("--interp", choices=METHODS, help="interpolation over the measured lights")
+    p.add_argument("--view-interp", choices=METHODS, help="interpolation over the cameras")
+    p.add_argument("-m", type=int, default=3, help="nearest measured lights (paper, default 3)")
+    p.add_argument("-n", type=int, default=3, help="nearest measured cameras (paper, default 3)")
+    p.add_argument("--paper", action="store_true", help="the paper's configuration exactly")
+    p.add_argument("--view", type=_angles, help="camera AZ,INCL in degrees (pixel fields: theirs)")
+    _add_camera_options(p)
+    p.add_argument("--yaw", type=float, default=0.0, help="rotate the environment, degrees CCW")
+    p.add_argument("--exposure", type=float, default=1.0, help="radiance scale (default 1)")
+    p.add_argument(
+        "--sequence",
+        choices=("turntable", "environment"),
+        default="environment",
+        help="for .gif/.mp4: orbit the camera, or rotate the environment (default)",
+    )
+    p.add_argument("--frames", type=int, default=36, help="frames of a sequence (default 36)")
+    p.add_argument("--fps", type=float, default=12.0, help="frames per second (default 12)")
+    p.add_argument(
+        "--renderer",
+        choices=("splat", "pyvista"),
+        default="splat",
+        help="draw the points with our splatter (default) or VTK (pyvista, .png only)",
+    )
+    p.add_argument("-o", "--output", type=Path, required=True, help=".exr/.png/.gif/.mp4")
+    p.set_defaults(handler=_run_relight)
+
+
+def _run_relight(args: argparse.Namespace) -> int:
+    from processing.panorama import read_panorama
+    from render.output import IMAGE_SUFFIXES, SEQUENCE_SUFFIXES
+
+    suffix = args.output.suffix.lower()
+    if suffix not in IMAGE_SUFFIXES + SEQUENCE_SUFFIXES:
+        raise RigError(
+            f"{args.output}: write one of {', '.join(IMAGE_SUFFIXES + SEQUENCE_SUFFIXES)}"
+        )
+    with contextlib.ExitStack() as stack:
+        field = _open_field_or_rti(args.field, stack)
+        return _relight_field(args, field, read_panorama(args.env), suffix)
+
+
+def _open_field_or_rti(path: Path, stack: contextlib.ExitStack) -> Any:
+    """A field store, or an RTI capture imported into a temporary store for this run."""
+    import tempfile
+
+    from processing.reflectance_field import ReflectanceField
+    from processing.rti import import_rti
+
+    lp = path
+    if path.is_dir() and not (path / "zarr.json").exists():
+        found = sorted(path.glob("*.lp"))
+        if len(found) != 1:
+            raise RigError(f"{path}: neither a field store nor a folder with one .lp file")
+        lp = found[0]
+    if lp.suffix.lower() != ".lp":
+        return ReflectanceField.open(path)
+    scratch = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="rig-rti-")))
+    return import_rti(lp, scratch / "field.zarr", progress=True)
+
+
+def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: str) -> int:
+    from dataclasses import replace
+
+    from core.camera_model import PinholeCamera
+    from render.output import IMAGE_SUFFIXES, display_picture, write_image, write_sequence
+    from render.relight_mode import open_relighter
+    from render.relighter import RelightSettings
+
+    if field.sample_kind == "pixels":
+        camera = field.cameras[0]
+        if args.view is not None:
+            raise RigError(f"{args.field} holds one fixed view; drop --view")
+    else:
+        if args.view is None:
+            raise RigError(f"--view AZ,INCL is needed to render the points of {args.field}")
+        camera = PinholeCamera(
+            args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
+        )
+    mode, models = _relight_mode(args, field)
+    for warning in _relight_warnings(field, camera, panorama, mode, models):
+        print(warning)
+    relighter = open_relighter(field, mode, models)
+    if suffix in IMAGE_SUFFIXES:
+        relighter.set_lighting(panorama, yaw_deg=args.yaw, exposure=args.exposure)
+        relighter.set_view(camera)
+        image = relighter.render()
+        if args.renderer == "pyvista":
+            _write_pyvista_picture(args, field, camera, image)
+        else:
+            write_image(args.output, image.rgb, image.coverage)
+        _report_relit(
+            args, image.holes, image.outside_fraction, not isinstance(mode, RelightSettings)
+        )
+        return 0
+    if args.frames < 1:
+        raise RigError(f"--frames must be at least 1, got {args.frames}")
+    if args.sequence == "turntable" and field.sample_kind == "pixels":
+        raise RigError(f"{args.field} holds one fixed view: use --sequence environment")
+    frames, exposure = [], None
+    relighter.set_lighting(panorama, yaw_deg=args.yaw, exposure=args.exposure)
+    relighter.set_view(camera)
+    from tqdm import tqdm
+
+    for frame in tqdm(range(args.frames), desc="frames", unit="frame"):
+        step = 360.0 * frame / args.frames
+        if args.sequence == "environment":
+            relighter.set_lighting(panorama, yaw_deg=args.yaw + step, exposure=args.exposure)
+        else:
+            relighter.set_view(replace(camera, azimuth_deg=(camera.azimuth_deg + step) % 360.0))
+        image = relighter.render()
+        if exposure is None:
+            from render.tonemap import auto_exposure
+
+            exposure = auto_exposure(image.rgb[image.coverage]) if image.coverage.any() else 1.0
+        frames.append(display_picture(image.rgb, image.coverage, exposure))
+    write_sequence(args.output, frames, fps=args.fps)
+    print(f"{args.frames} frames ({args.sequence}) -> {args.output}")
+    return 0
+
+
+def _relight_warnings(field: Any, camera: Any, panorama: Any, mode: Any, models: Any) -> list[Any]:
+    """What to expect of this relighting (render.guards.relight_warnings).
+
+    Interpolation modes without a fit in hand read the fit saved beside the field, if any: its
+    lobe and held-out error inform the ghosting, sun and noise guards.
+    """
+    import contextlib
+
+    from processing.sample_model_store import default_models_path, read_sample_models
+    from render.guards import relight_warnings
+    from render.relighter import RelightSettings
+
+    saved = default_models_path(field.path)
+    if isinstance(mode, RelightSettings) and models is None and saved.exists():
+        with contextlib.suppress(RigError):
+            models = read_sample_models(saved, field)
+    return relight_warnings(field, camera, panorama.rgb, mode, models)
+
+
+def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any]:
+    """The relighting mode the flags ask for, and the field's models when it needs them."""
+    from dataclasses import replace
+
+    from processing.sample_model_store import models_for_field
+    from render.model_relight import ModelRelightSettings
+    from render.relight_mode import most_accurate_mode
+    from render.relighter import RelightSettings
+
+    k = 64 if args.k is None else args.k
+    if args.paper:
+        return RelightSettings.paper_configuration(k=k), None
+    if args.scheme == "model":
+        lighting = "grid" if args.k is None else "sampled"
+        mode = ModelRelightSettings(
+            model=args.model, lighting=lighting, k=k, sampler=args.sampler, grid_height=args.grid
+        )
+        return mode, models_for_field(field, args.models, progress=True)
+    flags = (args.scheme, args.interp, args.view_interp, args.k)
+    if all(flag is None for flag in flags):
+        choice = most_accurate_mode(field, models_path=args.models, progress=True)
+        print(f"relighting mode: {choice.reason}")
+        if isinstance(choice.mode, ModelRelightSettings):
+            return replace(choice.mode, grid_height=args.grid), choice.models
+        return choice.mode, choice.models  # the fit still informs the warnings
+    settings = RelightSettings(args.scheme or "sampled", k=k, sampler=args.sampler, m=args.m,
+                               n=args.n)  # fmt: skip
+    if args.interp:
+        settings = replace(settings, interpolation=args.interp)
+    if args.view_interp:
+        settings = replace(settings, view_interpolation=args.view_interp)
+    return settings, None
+
+
+def _write_pyvista_picture(args: argparse.Namespace, field: Any, camera: Any, image: Any) -> None:
+    import numpy as np
+
+    from core.point_spacing import point_spacing
+    from render.overlay import write_png
+    from render.tonemap import auto_exposure, to_uint8, tone_map
+    from render.viewer import pyvista_picture
+
+    if field.sample_kind != "points" or args.output.suffix.lower() != ".png":
+        raise RigError("--renderer pyvista draws the points of a point field into a .png")
+    exposure = auto_exposure(image.rgb[image.coverage]) if image.coverage.any() else 1.0
+    colours = to_uint8(tone_map(image.radiance, exposure=exposure))
+    spacing = point_spacing(field.points)
+    write_png(
+        args.output,
+        pyvista_picture(
+            field.points, field.normals, np.ascontiguousarray(colours), camera, spacing
+        ),
+    )
+
+
+def _report_relit(args: argparse.Namespace, holes: Any, outside: float, models: bool) -> None:
+    print(f"{args.field} under {args.env} -> {args.output}")
+    if holes.any():
+        print(f"warning: {int(holes.sum())} visible samples are seen by no chosen camera (holes)")
+    if outside > 0.05 and not models:
+        print(
+            f"warning: {outside:.0%} of the light comes from outside the measured lights "
+            "(below the lowest ring, say); it is moved to the nearest measured lights"
+        )
+    elif outside > 0.05:
+        print(
+            f"note: {outside:.0%} of the light comes from outside the measured lights; the "
+            "fitted models shade it, its cast shadows are extrapolated from the measured ones"
+        )
+
+
+def _add_demo(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = commands.add_parser(
+        "demo",
+        help="run the demonstration pipeline and write its pictures",
+        description="Run the demonstration on the bundled panorama and write pictures and a "
+        "report to the output directory.",
+    )
+    p.add_argument("-o", "--output", type=Path, default=Path("demo-out"), help="output directory")
+    p.add_argument("--quick", action="store_true", help="small fields (a smoke test)")
+    p.set_defaults(handler=_run_demo)
+
+
+def _run_demo(args: argparse.Namespace) -> int:
+    from app.demo import run_demo
+
+    report = run_demo(args.output, quick=args.quick)
+    print(f"demo written to {args.output}/ (see {report})")
+    return 0
+
+
+def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = commands.add_parser("sim", help="the simulated world: scenes, ground truth, fields")
+    sim_commands = p.add_subparsers(dest="sim_command", required=True, metavar="SIM_COMMAND")
+    scenes = sim_commands.add_parser(
+        "scenes",
+        help="list the synthetic scenes with their geometry and materials",
+        description="List the synthetic scenes with every parameter needed to rebuild them in "
+        "another renderer.",
+    )
+    scenes.add_argument("--json", action="store_true", help="print a JSON list")
+    scenes.set_defaults(handler=_run_sim_scenes)
+    add_sim_start(sim_commands)
+
+    render = sim_commands.add_parser(
+        "render",
+        help="render the ground truth of a scene under a panorama",
+        description="Render a synthetic scene under a whole environment panorama (direct light, "
+        "with shadows) and write linear RGB plus coverage alpha as OpenEXR.",
+    )
+    render.add_argument("--scene", required=True, help="scene name (see rig sim scenes)")
+    render.add_argument("--env", type=Path, required=True, help="panorama file")
+    render.add_argument("--view", type=_angles, required=True, help="camera AZ,INCL in degrees")
+    _add_camera_options(render)
+    render.add_argument("--points", type=int, default=100_000, help="surface points (default 100k)")
+    render.add_argument(
+        "--grid",
+        type=int,
+        default=32,
+        help="pre-filter the panorama into GRID x 2 GRID directions (default 32; error measured "
+        "in the docs); 0 = every pixel (exact, slow)",
+    )
+    render.add_argument("-o", "--output", type=Path, required=True, help="output .exr")
+    render.set_defaults(handler=_run_sim_render)
+
+    photo = sim_commands.add_parser(
+        "photo",
+        help="one reflectance-field image: a scene under one light, through a sensor model",
+        description="Render a synthetic scene under ONE light (directional of unit irradiance, or "
+        "a point light at --light-distance) with shadows. The suffix of -o picks the output: "
+        ".exr linear RGB + coverage alpha (no sensor), .png/.jpg 8-bit sRGB, .tif 16-bit linear, "
+        ".dng Bayer raw (the last three through the sensor model: exposure, noise, saturation).",
+    )
+    photo.add_argument("--scene", required=True, help="scene name (see rig sim scenes)")
+    photo.add_argument("--view", type=_angles, required=True, help="camera AZ,INCL in degrees")
+    photo.add_argument("--light", type=_angles, required=True, help="light AZ,INCL in degrees")
+    photo.add_argument(
+        "--light-distance", type=float, help="point light at this distance (default: directional)"
+    )
+    _add_camera_options(photo)
+    photo.add_argument("--points", type=int, default=250_000, help="surface points (default 250k)")
+    photo.add_argument(
+        "--exposure-time",
+        type=float,
+        help="seconds (default: auto, the brightest 1%% of the object at 80%% of saturation)",
+    )
+    photo.add_argument("--seed", type=int, default=0, help="sensor noise seed (default 0)")
+    photo.add_argument("--no-noise", action="store_true", help="expected values, no noise")
+    photo.add_argument("-o", "--output", type=Path, required=True, help=".exr/.png/.jpg/.tif/.dng")
+    photo.set_defaults(handler=_run_sim_photo)
+
+    field = sim_commands.add_parser(
+        "field",
+        help="write a reflectance field store straight from the simulator",
+        description="Compute the radiance of every surface point under every light from every "
+        "camera (directional lights of unit irradiance, shadows included) and the cameras' "
+        "visibility masks, and write them as a Zarr field store.",
+    )
+    field.add_argument("--scene", required=True, help="scene name (see rig sim scenes)")
+    field.add_argument("--lights", type=int, required=True, help="number of light directions T")
+    field.add_argument("--cameras", type=int, required=True, help="number of cameras S")
+    field.add_argument("--layout", choices=("grid", "fibonacci"), default="grid")
+    field.add_argument("--points", type=int, default=100_000, help="surface points (default 100k)")
+    _add_camera_options(field)
+    field.add_argument("--dtype", choices=("float32", "float16"), default="float32")
+    field.add_argument("-o", "--output", type=Path, required=True, help="field store directory")
+    field.set_defaults(handler=_run_sim_field)
+
+
+def _angles(text: str) -> tuple[float, float]:
+    try:
+        azimuth, inclination = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected AZ,INCL in degrees, got {text!r}") from None
+    return azimuth, inclination
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+    return width, height
+
+
+def _add_camera_options(p: argparse.ArgumentParser) -> None:
+    """Camera flags shared by every command that renders a view (same defaults everywhere)."""
+    p.add_argument("--distance", type=float, default=4.0, help="camera distance (default 4)")
+    p.add_argument("--fov", type=float, default=40.0, help="horizontal field of view, degrees")
+    p.add_argument("--size", type=_size, default=(512, 512), help="image WIDTHxHEIGHT (512x512)")
+
+
+def _run_sim_field(args: argparse.Namespace) -> int:
+    from sim.field import field_cameras, simulate_field
+
+    cameras = field_cameras(
+        args.cameras,
+        args.layout,
+        distance=args.distance,
+        fov_deg=args.fov,
+        width=args.size[0],
+        height=args.size[1],
+    )
+    simulate_field(
+        args.output,
+        args.scene,
+        lights=args.lights,
+        cameras=cameras,
+        points=args.points,
+        layout=args.layout,
+        dtype=args.dtype,
+        progress=True,
+    )
+    print(
+        f"{args.scene}: {args.cameras} cameras x {args.lights} lights x {args.points} points "
+        f"-> {args.output}"
+    )
+    return 0
+
+
+def _run_sim_render(args: argparse.Namespace) -> int:
+    from core.camera_model import PinholeCamera
+    from processing.panorama import read_panorama, write_exr_rgba
+    from sim.ground_truth import render_environment
+    from sim.scenes import build_scene, get_scene
+
+    if not args.output.suffix.lower() == ".exr":
+        raise RigError(f"{args.output}: the ground truth is written as OpenEXR (.exr)")
+    spec = get_scene(args.scene)
+    panorama = read_panorama(args.env)
+    camera = PinholeCamera(
+        args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
+    )
+    samples = build_scene(spec.name, args.points)
+    image = render_environment(
+        samples,
+        panorama.rgb,
+        camera,
+        grid_height=args.grid or None,
+        shadows=not spec.convex,
+        progress=True,
+    )
+    write_exr_rgba(args.output, image.rgb, image.coverage.astype("float32"))
+    print(f"{spec.name} under {panorama.source} from {args.view} -> {args.output}")
+    return 0
+
+
+def _run_sim_photo(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from core.camera_model import PinholeCamera
+    from core.directions import direction_from_angles_deg
+    from processing.panorama import write_exr_rgba
+    from sim.scenes import build_scene, get_scene
+    from sim.sensor import Sensor, auto_exposure_time
+    from sim.sensor_files import PHOTO_SUFFIXES, write_photo
+    from sim.synthetic_camera import DirectionalLight, PointLight, render_under_light
+
+    suffix = args.output.suffix.lower()
+    if suffix != ".exr" and suffix not in PHOTO_SUFFIXES:
+        raise RigError(f"{args.output}: write .exr or one of {', '.join(PHOTO_SUFFIXES)}")
+    spec = get_scene(args.scene)
+    camera = PinholeCamera(
+        args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
+    )
+    towards = direction_from_angles_deg(*args.light)
+    light: DirectionalLight | PointLight
+    if args.light_distance is None:
+        light = DirectionalLight((float(towards[0]), float(towards[1]), float(towards[2])))
+    else:
+        where = towards * args.light_distance
+        light = PointLight((float(where[0]), float(where[1]), float(where[2])))
+    image = render_under_light(build_scene(spec.name, args.points), camera, light)
+    if suffix == ".exr":
+        write_exr_rgba(args.output, image.rgb, image.coverage.astype("float32"))
+        print(f"{spec.name} lit from {args.light} seen from {args.view} -> {args.output}")
+        return 0
+    sensor = Sensor(noise=not args.no_noise)
+    seconds = args.exposure_time or auto_exposure_time(image.rgb, sensor, image.coverage > 0)
+    write_photo(args.output, image.rgb, replace(sensor, exposure_s=seconds), seed=args.seed)
+    print(
+        f"{spec.name} lit from {args.light} seen from {args.view}, {seconds * 1e3:.3g} ms "
+        f"({PHOTO_SUFFIXES[suffix]}) -> {args.output}"
+    )
+    return 0
+
+
+def _run_sim_scenes(args: argparse.Namespace) -> int:
+    import json
+
+    from sim.scenes import SCENES
+
+    described = [spec.to_json() for spec in SCENES.values()]
+    if args.json:
+        print(json.dumps(described, indent=2))
+        return 0
+    for scene in described:
+        material = scene["material"]
+        geometry = ", ".join(f"{k}={v}" for k, v in scene["geometry"].items())
+        print(f"{scene['name']}: {scene['description']}")
+        print(f"  geometry: {geometry}")
+        print(
+            f"  material: rho_d={material['rho_d']} f0={material['f0']} alpha={material['alpha']}"
+        )
+        if "texture" in material:
+            print(f"  texture:  {material['texture']}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``rig`` argument parser with every sub-command."""
+    parser = argparse.ArgumentParser(
+        prog="rig",
+        description="Reflectance-field capture rig and controllable image-based relighting.",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_sample(commands)
+    _add_demo(commands)
+    _add_relight(commands)
+    add_doctor(commands)
+    add_plan(commands)
+    add_advise(commands)
+    add_bench_parser(commands)
+    add_capture(commands)
+    add_calibrate(commands)
+    add_process(commands)
+    _add_sim(commands)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``rig`` console script; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        status: int = args.handler(args)
+    except RigError as error:
+        print(f"rig {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"rig {args.command}: interrupted", file=sys.stderr)
+        return 130
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

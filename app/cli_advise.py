@@ -1,0 +1,89 @@
+"""``rig advise``: the cheapest relighting of a field within an error tolerance.
+
+Application layer (like ``app/cli.py``); the predictions are :mod:`render.advisor`'s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import asdict
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from render.advisor import Advice
+
+__all__ = ["add_advise", "advice_json", "run_advisor"]
+
+
+def add_advise(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``rig advise`` on the ``rig`` sub-command parser."""
+    p = commands.add_parser(
+        "advise",
+        help="the cheapest relighting configuration within an error tolerance",
+        description="Predict the error of each relighting configuration (the paper's, our "
+        "sampled and every-pixel schemes, per-sample models under sampled or grid lighting) on "
+        "a field under an environment, by holding out measured lights and cameras, and print "
+        "the fastest one predicted within the tolerance (docs/advisor.md).",
+    )
+    p.add_argument("field", type=Path, help="reflectance-field store")
+    p.add_argument("--env", type=Path, required=True, help="panorama (EXR, .hdr, PNG/JPEG)")
+    add_advisor_options(p)
+    p.add_argument("--json", type=Path, help="also write every prediction here")
+    p.set_defaults(handler=_run_advise)
+
+
+def add_advisor_options(p: argparse.ArgumentParser) -> None:
+    """The options ``rig advise`` and ``rig plan --advise`` share."""
+    p.add_argument(
+        "--tolerance", type=float, default=0.02, help="relative RMSE allowed (default 0.02)"
+    )
+    p.add_argument("--samples", type=int, default=3000, help="samples to predict on (default 3000)")
+
+
+def run_advisor(
+    field_path: Path, env: Path, tolerance: float, samples: int
+) -> tuple[Advice, tuple[int, int]]:
+    """Open the field and the panorama, and advise (progress bars on); also returns the
+    field's camera and light counts."""
+    from processing.panorama import read_panorama
+    from processing.reflectance_field import ReflectanceField
+    from render.advisor import Advisor
+
+    field = ReflectanceField.open(field_path)
+    panorama = read_panorama(env)
+    s, t, p = field.shape
+    print(f"{field_path}: {s} cameras x {t} lights x {p} samples; environment {env}")
+    advice = Advisor(field, samples=samples, progress=True).advise(panorama, tolerance)
+    return advice, (s, t)
+
+
+def advice_json(advice: Advice) -> dict[str, Any]:
+    """Every prediction as plain JSON."""
+
+    def row(prediction: Any) -> dict[str, Any]:
+        values = asdict(prediction)
+        values["candidate"] = {
+            "name": prediction.candidate.name,
+            "mode": type(prediction.candidate.mode).__name__,
+            "settings": asdict(prediction.candidate.mode),
+        }
+        return values
+
+    return {
+        "tolerance": advice.tolerance,
+        "samples": advice.samples,
+        "field_samples": advice.field_samples,
+        "choice": None if advice.choice is None else advice.choice.candidate.name,
+        "predictions": [row(p) for p in advice.predictions],
+    }
+
+
+def _run_advise(args: argparse.Namespace) -> int:
+    advice, _ = run_advisor(args.field, args.env, args.tolerance, args.samples)
+    print(advice.format())
+    if args.json is not None:
+        args.json.write_text(json.dumps(advice_json(advice), indent=2) + "\n")
+        print(f"predictions -> {args.json}")
+    return 0 if advice.choice is not None else 1

@@ -1,0 +1,182 @@
+"""The capture commands of ``rig``: ``rig capture``, ``rig verify``, ``rig export-lp``."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+from pathlib import Path
+from typing import Any
+
+from capture.calibration_plan import with_calibration_captures
+from core.errors import InputError
+from sim.simulated_rig import simulated_capture_config
+
+__all__ = ["add_capture", "console_placer"]
+
+#: What a person is asked to put at the object's place, by calibration capture name.
+TARGET_WORDS = {
+    "charuco": "the ChArUco board (flat, printed side up)",
+    "mirror-sphere": "the mirror sphere",
+    "white-target": "the white target (flat, face up)",
+}
+
+#: Exit status of a paused or aborted capture (the shell's convention for Ctrl-C).
+INTERRUPTED = 130
+
+
+def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = commands.add_parser(
+        "capture",
+        help="run a sweep plan on a rig (real or simulated) into a dataset",
+        description="Run a capture: --config and --plan on a rig; --sim with a grid plan on the "
+        "simulated rig started in this process; --resume DATASET continues a stopped capture "
+        "(files already taken are verified by checksum, missing or corrupt ones re-taken). "
+        "Ctrl-C finishes the current image, parks and stops with status paused.",
+    )
+    p.add_argument("-o", "--output", type=Path, help="new dataset directory")
+    p.add_argument("--resume", type=Path, metavar="DATASET", help="continue this dataset")
+    p.add_argument("--config", type=Path, help="rig config (TOML)")
+    p.add_argument("--plan", type=Path, help="sweep plan (TOML)")
+    p.add_argument("--sim", action="store_true", help="the simulated rig, in this process")
+    p.add_argument("--cameras", type=int, default=6, help="--sim: camera poses (default 6)")
+    p.add_argument("--lights", type=int, default=8, help="--sim: light poses (default 8)")
+    p.add_argument("--scene", default="glossy-sphere", help="--sim: scene (default glossy-sphere)")
+    p.add_argument("--layout", choices=("fibonacci", "grid"), default="fibonacci",
+                   help="--sim: camera and light layout (default fibonacci)")  # fmt: skip
+    p.add_argument("--size", type=int, default=128, help="--sim: image side, pixels (default 128)")
+    p.add_argument("--points", type=int, default=20_000, help="--sim: scene points (default 20k)")
+    p.add_argument("--exposure-ms", type=float, default=40.0, help="--sim: exposure (default 40)")
+    p.add_argument(
+        "--speed", type=float, default=1.0, help="--sim: axis speed factor (default 1: real time)"
+    )
+    p.add_argument(
+        "--calibrate",
+        action="store_true",
+        help="--sim: take calibration captures first (ChArUco per camera, mirror sphere and "
+        "white target per light; docs/calibration.md)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_run_capture)
+
+    v = commands.add_parser(
+        "verify",
+        help="check a dataset's completeness and integrity",
+        description="Check every image's size and SHA-256 against the manifest and journal, list "
+        "missing, corrupt and unexpected files. Exits 1 when anything is wrong.",
+    )
+    v.add_argument("dataset", type=Path)
+    v.set_defaults(handler=_run_verify)
+
+    e = commands.add_parser(
+        "export-lp",
+        help="write an RTI .lp file per camera pose of a dataset",
+        description="Write camera_NNN.lp (light directions in each camera's frame) for RTI tools.",
+    )
+    e.add_argument("dataset", type=Path)
+    e.add_argument("-o", "--output", type=Path, required=True, help="output directory")
+    e.set_defaults(handler=_run_export_lp)
+
+
+def console_placer(name: str | None) -> None:
+    """Ask the person at the rig to put ``name`` (None: the object) in place; waits for Enter."""
+    what = "the object" if name is None else TARGET_WORDS.get(name, f"the {name} target")
+    input(f"place {what} at the object's place and press Enter ")
+
+
+def _run_capture(args: argparse.Namespace) -> int:
+    from capture.dataset import Dataset
+    from capture.plan import SweepPlan, grid_plan, load_plan
+    from rig.config import load_config, parse_config
+
+    if args.resume is not None:
+        if args.output is not None or args.plan is not None:
+            raise InputError("--resume continues a dataset: drop -o and --plan")
+        dataset = Dataset.open(args.resume)
+        config = load_config(args.config) if args.config else parse_config(dataset.rig_config)
+        plan = SweepPlan.from_dict(dataset.plan)
+    else:
+        if args.output is None:
+            raise InputError("say where the new dataset goes: -o DATASET (or --resume DATASET)")
+        if args.sim:
+            config = simulated_capture_config(
+                args.scene, size=args.size, points=args.points, speed=args.speed
+            )
+            plan = grid_plan(
+                args.cameras, args.lights, exposures_ms=(args.exposure_ms,), layout=args.layout
+            )
+            if args.calibrate:
+                plan = with_calibration_captures(plan, config)
+        else:
+            if args.config is None or args.plan is None:
+                raise InputError("a capture needs --config and --plan (or --sim)")
+            if args.calibrate:
+                raise InputError("--calibrate is for --sim; list [[calibration]] in the plan")
+            config, plan = load_config(args.config), load_plan(args.plan)
+        dataset = Dataset.create(
+            args.output,
+            rig_config=config.to_dict(),
+            plan=plan.to_dict(),
+            planned=plan.planned_keys(config),
+        )
+    result = _capture(config, dataset, plan, progress=not args.quiet)
+    print(
+        f"{result.exit_status}: {result.taken} images taken, {result.already_done} already "
+        f"there, {result.retaken} re-taken -> {dataset.path}"
+    )
+    if result.reason:
+        print(f"reason: {result.reason}")
+    return {"success": 0, "paused": INTERRUPTED, "aborted": INTERRUPTED}.get(result.exit_status, 1)
+
+
+def _capture(config: Any, dataset: Any, plan: Any, *, progress: bool) -> Any:
+    """Run the plan on the config's rig (simulated rigs are started here)."""
+    import contextlib
+
+    from capture.session import CaptureSession
+    from rig.cameras import open_camera
+    from rig.hardware import Rig
+
+    with contextlib.ExitStack() as stack:
+        placer: Any = console_placer
+        if config.camera.backend == "simulated":
+            from sim.simulated_rig import SimulatedRig
+
+            simulated = stack.enter_context(SimulatedRig(config))
+            rig = simulated.rig()
+            placer = rig.camera.place_target  # type: ignore[union-attr]
+        else:
+            rig = Rig(config, open_camera(config))
+        stack.enter_context(rig)
+        session = CaptureSession(rig, dataset, plan, progress=progress, targets=placer)
+        previous = signal.getsignal(signal.SIGINT)
+
+        def on_interrupt(number: int, frame: Any) -> None:
+            # First Ctrl-C: finish the image and park; a second one interrupts at once.
+            session.request_pause()
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+
+        signal.signal(signal.SIGINT, on_interrupt)
+        try:
+            return session.run()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _run_verify(args: argparse.Namespace) -> int:
+    from capture.dataset import Dataset
+
+    report = Dataset.open(args.dataset).verify()
+    print(report.summary())
+    for problem in report.problems():
+        print(f"  {problem}")
+    return 0 if report.ok and report.complete else 1
+
+
+def _run_export_lp(args: argparse.Namespace) -> int:
+    from capture.dataset import Dataset
+    from capture.lp_export import export_lp
+
+    written = export_lp(Dataset.open(args.dataset), args.output)
+    for path in written:
+        print(path)
+    return 0

@@ -1,0 +1,247 @@
+"""Point splatting kernels: a z-buffer of disks, and depth-tested blending (numba).
+
+Shared by the simulator's camera and the renderer (``render.splat``), so both live beside the
+camera model they project with.
+
+Points are disks of a given pixel radius at continuous image coordinates (pixel (i, j) is centred
+at (i + 0.5, j + 0.5)). The same z-buffer serves the camera (visibility) and the light (shadow
+map). Blending keeps every splat within a depth tolerance of the front surface, weighted by
+1 - (d / r)^2, so neighbouring points of one surface mix and hidden surfaces do not.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from core.camera_model import PinholeCamera
+
+__all__ = [
+    "DEPTH_TOLERANCE",
+    "MIN_RADIUS_PX",
+    "SPLAT_RADIUS",
+    "CameraSplats",
+    "blend_splats",
+    "camera_splats",
+    "depth_at_points",
+    "disk_bounds",
+    "shown_points",
+    "zbuffer",
+]
+
+#: Splat radius and depth tolerance in splat sizes; the smallest splat radius, in pixels.
+SPLAT_RADIUS = 1.0
+DEPTH_TOLERANCE = 2.0
+MIN_RADIUS_PX = 0.75
+
+
+@dataclass(frozen=True)
+class CameraSplats:
+    """Points as disks in one camera's image.
+
+    Attributes
+    ----------
+    cols, rows : ndarray, shape (P,), continuous pixel coordinates
+    depth : ndarray, shape (P,), along the viewing axis (inf for back faces: never shown)
+    radius : ndarray, shape (P,), pixels, at least MIN_RADIUS_PX
+    buffer : ndarray, shape (H, W), the z-buffer of the disks
+    tolerance : float, scene units: splats this close behind the front surface blend
+    """
+
+    cols: NDArray[np.float64]
+    rows: NDArray[np.float64]
+    depth: NDArray[np.float64]
+    radius: NDArray[np.float64]
+    buffer: NDArray[np.float64]
+    tolerance: float
+
+
+def camera_splats(
+    points: NDArray[np.floating],
+    normals: NDArray[np.floating],
+    camera: PinholeCamera,
+    spacing: float,
+) -> CameraSplats:
+    """Project points (P, 3) with normals (P, 3) spaced ``spacing`` apart as splats.
+
+    A splat is one point spacing wide, or MIN_RADIUS_PX when points are denser than pixels;
+    the depth tolerance follows the splat's size in the scene (not only the spacing), so the
+    points one small splat covers on a steep surface near the silhouette still blend.
+    """
+    cloud = np.asarray(points, dtype=np.float64)
+    cols, rows, depth = camera.project(cloud)
+    facing = np.einsum("pk,pk->p", np.asarray(normals, np.float64), camera.position - cloud) > 0
+    depth = np.where(facing, depth, np.inf)
+    radius = np.maximum(SPLAT_RADIUS * spacing * camera.focal_px / depth, MIN_RADIUS_PX)
+    buffer = zbuffer(cols, rows, depth, radius, camera.height, camera.width)
+    size = max(SPLAT_RADIUS * spacing, MIN_RADIUS_PX * camera.distance / camera.focal_px)
+    return CameraSplats(cols, rows, depth, radius, buffer, DEPTH_TOLERANCE * size)
+
+
+def zbuffer(
+    cols: NDArray[np.float64],
+    rows: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    height: int,
+    width: int,
+) -> NDArray[np.float64]:
+    """Nearest depth over every pixel that a disk covers; (H, W), ``inf`` where nothing is."""
+    buffer = np.full((height, width), np.inf)
+    _zbuffer(cols, rows, depth, radius, buffer)
+    return buffer
+
+
+def depth_at_points(
+    cols: NDArray[np.float64], rows: NDArray[np.float64], buffer: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The z-buffer value at the pixel under each point's centre; ``inf`` off the image."""
+    height, width = buffer.shape
+    i = np.floor(rows).astype(np.int64)
+    j = np.floor(cols).astype(np.int64)
+    inside = (i >= 0) & (i < height) & (j >= 0) & (j < width)
+    out = np.full(cols.shape, np.inf)
+    out[inside] = buffer[i[inside], j[inside]]
+    return out
+
+
+def shown_points(
+    cols: NDArray[np.float64],
+    rows: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    buffer: NDArray[np.float64],
+    tolerance: float,
+) -> NDArray[np.bool_]:
+    """Points (P,) whose splat blends into at least one pixel: the points an image shows.
+
+    A point on a steep (grazing) surface can fail the depth test at its own centre yet show
+    at a neighbouring pixel; it is seen, and its radiance is needed.
+    """
+    shown = np.zeros(cols.shape, dtype=np.bool_)
+    _shown(cols, rows, depth, radius, buffer, tolerance, shown)
+    return shown
+
+
+def blend_splats(
+    cols: NDArray[np.float64],
+    rows: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    colours: NDArray[np.float64],
+    buffer: NDArray[np.float64],
+    tolerance: float,
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Blend the front surface's splats.
+
+    Returns
+    -------
+    image : ndarray, shape (H, W, 3), float32, weighted mean colour (0 where uncovered)
+    weight : ndarray, shape (H, W), float32, summed splat weight (0 where uncovered)
+    """
+    height, width = buffer.shape
+    total = np.zeros((height, width, 3))
+    weight = np.zeros((height, width))
+    _blend(cols, rows, depth, radius, colours, buffer, tolerance, total, weight)
+    image = np.divide(
+        total, weight[:, :, None], out=np.zeros_like(total), where=weight[:, :, None] > 0
+    )
+    return image.astype(np.float32), weight.astype(np.float32)
+
+
+@numba.njit(cache=True, inline="always")
+def disk_bounds(
+    row: float, col: float, depth: float, r: float, height: int, width: int
+) -> tuple[int, int, int, int]:
+    """Row and column ranges (i0, i1, j0, j1) whose pixel centres may lie within r of (row, col).
+
+    An empty range for a point behind the camera or off any finite position.
+    """
+    if not (depth > 0.0 and math.isfinite(depth) and math.isfinite(row) and math.isfinite(col)):
+        return 0, -1, 0, -1
+    return (
+        max(0, math.floor(row - r - 0.5)),
+        min(height - 1, math.ceil(row + r - 0.5)),
+        max(0, math.floor(col - r - 0.5)),
+        min(width - 1, math.ceil(col + r - 0.5)),
+    )
+
+
+@numba.njit(cache=True)
+def _zbuffer(
+    cols: NDArray[np.float64],
+    rows: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    buffer: NDArray[np.float64],
+) -> None:
+    height, width = buffer.shape
+    for p in range(cols.shape[0]):
+        z = depth[p]
+        r2 = radius[p] * radius[p]
+        i0, i1, j0, j1 = disk_bounds(rows[p], cols[p], z, radius[p], height, width)
+        for i in range(i0, i1 + 1):
+            dy = i + 0.5 - rows[p]
+            for j in range(j0, j1 + 1):
+                dx = j + 0.5 - cols[p]
+                if dx * dx + dy * dy <= r2 and z < buffer[i, j]:
+                    buffer[i, j] = z
+
+
+@numba.njit(cache=True)
+def _blend(
+    cols: NDArray[np.float64],
+    rows: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    colours: NDArray[np.float64],
+    buffer: NDArray[np.float64],
+    tolerance: float,
+    total: NDArray[np.float64],
+    weight: NDArray[np.float64],
+) -> None:
+    height, width = buffer.shape
+    for p in range(cols.shape[0]):
+        z = depth[p]
+        r2 = radius[p] * radius[p]
+        i0, i1, j0, j1 = disk_bounds(rows[p], cols[p], z, radius[p], height, width)
+        for i in range(i0, i1 + 1):
+            dy = i + 0.5 - rows[p]
+            for j in range(j0, j1 + 1):
+                dx = j + 0.5 - cols[p]
+                d2 = dx * dx + dy * dy
+                if d2 <= r2 and z <= buffer[i, j] + tolerance:
+                    w = 1.0 - d2 / (r2 + 1e-12) + 1e-3
+                    total[i, j, 0] += w * colours[p, 0]
+                    total[i, j, 1] += w * colours[p, 1]
+                    total[i, j, 2] += w * colours[p, 2]
+                    weight[i, j] += w
+
+
+@numba.njit(cache=True)
+def _shown(
+    cols: NDArray[np.float64],
+    rows: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    buffer: NDArray[np.float64],
+    tolerance: float,
+    shown: NDArray[np.bool_],
+) -> None:
+    height, width = buffer.shape
+    for p in range(cols.shape[0]):
+        r2 = radius[p] * radius[p]
+        i0, i1, j0, j1 = disk_bounds(rows[p], cols[p], depth[p], radius[p], height, width)
+        for i in range(i0, i1 + 1):
+            dy = i + 0.5 - rows[p]
+            for j in range(j0, j1 + 1):
+                dx = j + 0.5 - cols[p]
+                if dx * dx + dy * dy <= r2 and depth[p] <= buffer[i, j] + tolerance:
+                    shown[p] = True
+                    break
+            if shown[p]:
+                break

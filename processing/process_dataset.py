@@ -1,0 +1,176 @@
+"""A capture dataset to a field store, with what the dataset does not say given by the caller.
+
+:func:`process_dataset` is ``rig process``: it finds the camera model (given, from the rig
+config snapshot, or the first image's size), takes the manifest's calibration unless told not
+to, and builds the field (:func:`processing.field_builder.build_field`). The object's surface
+samples and the camera's radiometric scale come from a :class:`FieldSources`: a point-cloud
+file (:func:`point_cloud_sources`), or for a simulated capture the simulator's scene and sensor
+(``sim.capture_sources``; this package does not import the simulator, the protocol is the seam).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from capture.dataset import Dataset
+from core.camera_model import RigCamera
+from core.errors import InputError
+from processing.decode import decode_image
+from processing.field_builder import FieldBuildReport, build_field
+from processing.point_cloud import PointCloud, read_point_cloud
+
+__all__ = ["FieldSources", "PointCloudSources", "point_cloud_sources", "process_dataset"]
+
+
+class FieldSources(Protocol):
+    """What a field needs beyond a dataset's images.
+
+    Attributes
+    ----------
+    points, normals : ndarray, shape (P, 3), the object's surface samples, rig frame
+    spacing : float or None, the points' spacing (None: estimated from the points)
+    radiance_scale : float or None, decoded value per unit radiance per millisecond (None: 1,
+        the field stays in camera units)
+    light_model : dict or None, the store's light model (None: directional, unit intensity)
+    provenance : mapping, merged into the store's provenance
+    """
+
+    @property
+    def points(self) -> NDArray[np.floating]: ...
+    @property
+    def normals(self) -> NDArray[np.floating]: ...
+    @property
+    def spacing(self) -> float | None: ...
+    @property
+    def radiance_scale(self) -> float | None: ...
+    @property
+    def light_model(self) -> dict[str, Any] | None: ...
+    @property
+    def provenance(self) -> Mapping[str, Any]: ...
+
+
+@dataclass(frozen=True)
+class PointCloudSources:
+    """:class:`FieldSources` of a point cloud (a scan of the object) and an optional scale."""
+
+    points: NDArray[np.float32]
+    normals: NDArray[np.float32]
+    spacing: float | None
+    radiance_scale: float | None = None
+    light_model: dict[str, Any] | None = None
+    provenance: Mapping[str, Any] = field(default_factory=dict)
+
+
+def point_cloud_sources(
+    path: str | os.PathLike[str],
+    *,
+    spacing: float | None = None,
+    radiance_scale: float | None = None,
+) -> PointCloudSources:
+    """The sources of a real capture: the object's points read from ``.ply`` or ``.npz``."""
+    cloud = read_point_cloud(path)
+    return PointCloudSources(
+        cloud.points,
+        cloud.normals,
+        cloud.spacing if spacing is None else spacing,
+        radiance_scale,
+        provenance={"points_file": str(path)},
+    )
+
+
+def dataset_camera_model(
+    dataset: Dataset,
+    *,
+    distance: float | None = None,
+    fov_deg: float | None = None,
+    size: tuple[int, int] | None = None,
+) -> RigCamera | None:
+    """The rig's camera model: the values given, else the config snapshot's, else (for the
+    size) the first image's; None when distance or field of view is known nowhere.
+
+    Parameters
+    ----------
+    distance : float, camera distance from the object centre, scene units
+    fov_deg : float, horizontal field of view
+    size : (width, height) in pixels
+    """
+    camera: dict[str, Any] = dict(dataset.rig_config.get("camera") or {})
+    distance = distance if distance is not None else camera.get("distance")
+    fov_deg = fov_deg if fov_deg is not None else camera.get("fov_deg")
+    if size is not None:
+        width, height = size
+    elif camera.get("width") and camera.get("height"):
+        width, height = int(camera["width"]), int(camera["height"])
+    else:
+        first = next((r for r in dataset.records if r.kind == "light"), None)
+        if first is None:
+            return None
+        height, width = decode_image(dataset.image_path(first)).shape
+    if distance is None or fov_deg is None:
+        return None
+    return RigCamera(float(distance), float(fov_deg), width, height)
+
+
+def process_dataset(
+    dataset: Dataset | str | os.PathLike[str],
+    output: str | os.PathLike[str],
+    sources: FieldSources,
+    *,
+    camera_distance: float | None = None,
+    fov_deg: float | None = None,
+    size: tuple[int, int] | None = None,
+    ignore_calibration: bool = False,
+    light_intensity: float = 1.0,
+    allow_missing: bool = False,
+    dtype: str = "float32",
+    demosaic: str = "linear",
+    progress: bool = False,
+) -> FieldBuildReport:
+    """Build the field store of a dataset (``rig process``).
+
+    Parameters
+    ----------
+    dataset : Dataset, or its directory
+    output : path of the new field store
+    sources : FieldSources, the object's points and the camera's scale
+    camera_distance, fov_deg, size : the camera model where the dataset does not say it (see
+        :func:`dataset_camera_model`)
+    ignore_calibration : bool, use the measured poses, not the manifest's calibration
+    light_intensity, allow_missing, dtype, demosaic, progress : see
+        :func:`processing.field_builder.build_field`
+
+    Raises
+    ------
+    InputError
+        No camera model and no calibrated cameras.
+    """
+    data = dataset if isinstance(dataset, Dataset) else Dataset.open(dataset)
+    calibration = None if ignore_calibration else (data.calibration or None)
+    camera = dataset_camera_model(data, distance=camera_distance, fov_deg=fov_deg, size=size)
+    if camera is None and not (calibration and "cameras" in calibration):
+        raise InputError(
+            f"{data.path}: no camera model; give --camera-distance and --fov (and --size), or "
+            f"calibrate the cameras"
+        )
+    cloud = PointCloud.from_arrays(sources.points, sources.normals, sources.spacing)
+    return build_field(
+        data,
+        output,
+        cloud,
+        camera=camera,
+        calibration=calibration,
+        radiance_scale=1.0 if sources.radiance_scale is None else sources.radiance_scale,
+        light_intensity=light_intensity,
+        allow_missing=allow_missing,
+        dtype=dtype,
+        demosaic=demosaic,
+        light_model=sources.light_model,
+        provenance={"tool": "rig process", **sources.provenance},
+        progress=progress,
+    )
