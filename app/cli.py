@@ -160,7 +160,7 @@ def _open_field_or_rti(path: Path, stack: contextlib.ExitStack) -> Any:
     """A field store, or an RTI capture imported into a temporary store for this run."""
     import tempfile
 
-    from processing.reflectance_field import ReflectanceField
+    from core.field_store import ReflectanceField
     from processing.rti import import_rti
 
     lp = path
@@ -291,8 +291,8 @@ def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any]:
 def _write_pyvista_picture(args: argparse.Namespace, field: Any, camera: Any, image: Any) -> None:
     import numpy as np
 
+    from core.image_io import write_srgb8
     from core.point_spacing import point_spacing
-    from render.overlay import write_png
     from render.tonemap import auto_exposure, to_uint8, tone_map
     from render.viewer import pyvista_picture
 
@@ -301,7 +301,7 @@ def _write_pyvista_picture(args: argparse.Namespace, field: Any, camera: Any, im
     exposure = auto_exposure(image.rgb[image.coverage]) if image.coverage.any() else 1.0
     colours = to_uint8(tone_map(image.radiance, exposure=exposure))
     spacing = point_spacing(field.points)
-    write_png(
+    write_srgb8(
         args.output,
         pyvista_picture(
             field.points, field.normals, np.ascontiguousarray(colours), camera, spacing
@@ -476,7 +476,8 @@ def _run_sim_field(args: argparse.Namespace) -> int:
 
 def _run_sim_render(args: argparse.Namespace) -> int:
     from core.camera_model import PinholeCamera
-    from processing.panorama import read_panorama, write_exr_rgba
+    from core.image_io import write_exr
+    from processing.panorama import read_panorama
     from sim.ground_truth import render_environment
     from sim.scenes import build_scene, get_scene
 
@@ -496,7 +497,7 @@ def _run_sim_render(args: argparse.Namespace) -> int:
         shadows=not spec.convex,
         progress=True,
     )
-    write_exr_rgba(args.output, image.rgb, image.coverage.astype("float32"))
+    write_exr(args.output, image.rgb, image.coverage.astype("float32"))
     print(f"{spec.name} under {panorama.source} from {args.view} -> {args.output}")
     return 0
 
@@ -506,7 +507,7 @@ def _run_sim_photo(args: argparse.Namespace) -> int:
 
     from core.camera_model import PinholeCamera
     from core.directions import direction_from_angles_deg
-    from processing.panorama import write_exr_rgba
+    from core.image_io import write_exr
     from sim.scenes import build_scene, get_scene
     from sim.sensor import Sensor, auto_exposure_time
     from sim.sensor_files import PHOTO_SUFFIXES, write_photo
@@ -528,7 +529,7 @@ def _run_sim_photo(args: argparse.Namespace) -> int:
         light = PointLight((float(where[0]), float(where[1]), float(where[2])))
     image = render_under_light(build_scene(spec.name, args.points), camera, light)
     if suffix == ".exr":
-        write_exr_rgba(args.output, image.rgb, image.coverage.astype("float32"))
+        write_exr(args.output, image.rgb, image.coverage.astype("float32"))
         print(f"{spec.name} lit from {args.light} seen from {args.view} -> {args.output}")
         return 0
     sensor = Sensor(noise=not args.no_noise)

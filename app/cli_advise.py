@@ -47,8 +47,8 @@ def run_advisor(
 ) -> tuple[Advice, tuple[int, int]]:
     """Open the field and the panorama, and advise (progress bars on); also returns the
     field's camera and light counts."""
+    from core.field_store import ReflectanceField
     from processing.panorama import read_panorama
-    from processing.reflectance_field import ReflectanceField
     from render.advisor import Advisor
 
     field = ReflectanceField.open(field_path)

@@ -86,9 +86,9 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
     """Relight simulated fields; returns the report's lines."""
     import numpy as np
 
-    from processing.reflectance_field import ReflectanceField
+    from core.field_store import ReflectanceField
+    from core.image_io import write_srgb8
     from render.output import display_picture, write_sequence
-    from render.overlay import write_png
     from render.relight_mode import most_accurate_mode, open_relighter
     from render.relighter import RelightSettings, best_settings
     from render.tonemap import auto_exposure
@@ -118,7 +118,9 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
         truth = render_environment(samples, panorama.rgb, view, shadows=not get_scene(scene).convex)
         exposure = auto_exposure(truth.rgb[truth.coverage])
         folder = out / "relight" / scene
-        write_png(folder / "ground-truth.png", display_picture(truth.rgb, truth.coverage, exposure))
+        write_srgb8(
+            folder / "ground-truth.png", display_picture(truth.rgb, truth.coverage, exposure)
+        )
         lines.append(
             f"| {scene} | ground truth | - | - | [png](relight/{scene}/ground-truth.png) |"
         )
@@ -139,7 +141,9 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
             error = np.sqrt(
                 np.mean((image.rgb[mask] - truth.rgb[mask]) ** 2) / np.mean(truth.rgb[mask] ** 2)
             )
-            write_png(folder / f"{name}.png", display_picture(image.rgb, image.coverage, exposure))
+            write_srgb8(
+                folder / f"{name}.png", display_picture(image.rgb, image.coverage, exposure)
+            )
             link = f"[png](relight/{scene}/{name}.png)"
             lines.append(f"| {scene} | {label} | {error:.2%} | {ms:.1f} | {link} |")
         relighter = open_relighter(field, choice.mode, choice.models)
@@ -172,11 +176,11 @@ def _rti_demo(out: Path) -> list[str]:
 
     import numpy as np
 
+    from core.image_io import write_srgb8
     from processing.panorama import read_panorama
     from processing.rti import import_rti
     from processing.sample_models import choose_model, format_loo_table, interpolation_loo
     from render.output import display_picture
-    from render.overlay import write_png
     from render.relight_mode import most_accurate_mode, open_relighter
 
     lines = ["## Relighting a real RTI capture", ""]
@@ -197,7 +201,7 @@ def _rti_demo(out: Path) -> list[str]:
             image = relighter.render()
             picture = display_picture(image.rgb, image.coverage)
             target = out / "relight" / "rti" / f"{name}.png"
-            write_png(target, np.repeat(np.repeat(picture, 4, axis=0), 4, axis=1))
+            write_srgb8(target, np.repeat(np.repeat(picture, 4, axis=0), 4, axis=1))
             lines.append(f"- under {name}: [png](relight/rti/{name}.png)")
         lines += ["", f"Relighting mode: {choice.reason}.", "", "Leave-one-light-out error:", ""]
         lines.append(format_loo_table(choose_model(choice.models).table, extra={

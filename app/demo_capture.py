@@ -90,7 +90,7 @@ def _advise_captured(
 ) -> list[str]:
     """``rig advise`` and ``rig plan --advise`` on the captured field, with the choice's true
     error at a view between the captured cameras."""
-    from processing.reflectance_field import ReflectanceField
+    from core.field_store import ReflectanceField
     from processing.sample_model_store import models_for_field
     from render.advisor import Advisor, capture_density
     from render.relight_mode import open_relighter
@@ -142,7 +142,7 @@ def _agreement(
     skipped: list[tuple[int, int]],
 ) -> list[str]:
     """The captured field against the one the simulator writes directly."""
-    from processing.reflectance_field import ReflectanceField
+    from core.field_store import ReflectanceField
     from sim.field import field_cameras, simulate_field
 
     direct_path = root / "direct.zarr"
@@ -175,10 +175,10 @@ def _agreement(
 
 def _relight_captured(out: Path, field_path: Path, panorama: Panorama, quick: bool) -> list[str]:
     """Relight the captured field at several K and views; pictures, a contact sheet, errors."""
-    from processing.reflectance_field import ReflectanceField
+    from core.field_store import ReflectanceField
+    from core.image_io import write_srgb8
     from render.model_relight import ModelRelightSettings
     from render.output import display_picture
-    from render.overlay import write_png
     from render.relight_mode import RelightMode, most_accurate_mode, open_relighter
     from render.relighter import RelightSettings
     from render.tonemap import auto_exposure
@@ -218,13 +218,13 @@ def _relight_captured(out: Path, field_path: Path, panorama: Panorama, quick: bo
             image = engine.render()
             error = _image_error(image, truth)
             picture = display_picture(image.rgb, image.coverage, exposure)
-            write_png(out / "capture" / "relit" / f"{view_name}-{name}.png", picture)
+            write_srgb8(out / "capture" / "relit" / f"{view_name}-{name}.png", picture)
             row.append(_labelled(picture, f"{name} {error:.1%}"))
             cells.append(f"[{error:.2%}](capture/relit/{view_name}-{name}.png)")
         lines.append(f"| {view_name} | " + " | ".join(cells) + " |")
         tiles.append(np.concatenate(row, axis=1))
     sheet = np.concatenate(tiles, axis=0)
-    write_png(out / "capture" / "contact-sheet.png", sheet)
+    write_srgb8(out / "capture" / "contact-sheet.png", sheet)
     return [*lines, "", "Contact sheet: [capture/contact-sheet.png](capture/contact-sheet.png)"]
 
 

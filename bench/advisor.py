@@ -24,8 +24,8 @@ import numpy as np
 
 from bench.relight import Truth, image_errors
 from core.camera_model import PinholeCamera
+from core.field_store import ReflectanceField
 from processing.panorama import Panorama
-from processing.reflectance_field import ReflectanceField
 from processing.sample_models import SampleModels
 from render.advisor import Advisor
 from render.relight_mode import open_relighter

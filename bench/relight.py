@@ -27,9 +27,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.camera_model import PinholeCamera
+from core.field_store import ReflectanceField
 from core.sample_data import PANORAMA_NAMES, PanoramaName, panorama_path
 from processing.panorama import Panorama, panorama_from_array, read_panorama
-from processing.reflectance_field import ReflectanceField
 from processing.sample_model_store import models_for_field
 from processing.sample_models import SampleModels, choose_model, interpolation_loo
 from render.light_weights import pixel_light_weights

@@ -31,10 +31,10 @@ from core.camera_model import PinholeCamera, RigCamera
 from core.colour import luminance
 from core.directions import panorama_solid_angles
 from core.errors import DatasetError
+from core.field_store import ReflectanceField
 from core.sample_data import panorama_path
 from processing.field_layout import field_layout
 from processing.panorama import panorama_from_array, read_panorama
-from processing.reflectance_field import ReflectanceField
 from processing.sample_models import SampleModels, fit_sample_models
 from render.guards import relight_warnings
 from render.relight_mode import MOST_ACCURATE_MODELS, RelightMode, open_relighter

@@ -54,9 +54,9 @@ from bench.stability import run_stability
 from core.camera_model import PinholeCamera
 from core.colour import linear_to_srgb
 from core.errors import InputError
+from core.field_store import ReflectanceField
 from core.sample_data import PanoramaName, panorama_path
 from processing.panorama import Panorama, panorama_from_array, read_panorama
-from processing.reflectance_field import ReflectanceField
 from processing.sample_model_store import (
     default_models_path,
     models_for_field,

@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from core.directions import angles_deg_from_direction, direction_from_angles_deg
 from core.errors import InputError
 
-__all__ = ["PinholeCamera"]
+__all__ = ["PinholeCamera", "RigCamera", "camera_to_rig", "rig_to_camera"]
 
 
 @dataclass(frozen=True)
@@ -163,3 +163,51 @@ class RigCamera:
         return PinholeCamera(
             azimuth_deg, inclination_deg, self.distance, self.fov_deg, self.width, self.height
         )
+
+
+def _camera_frame(camera: PinholeCamera) -> NDArray[np.float64]:
+    """Rows: the camera frame's x (right), y (up) and z (toward the camera) in the rig frame."""
+    right, up, forward = camera.axes()
+    return np.stack([right, up, -forward])
+
+
+def _as_directions(directions: ArrayLike) -> NDArray[np.float64]:
+    vectors = np.asarray(directions, dtype=np.float64)
+    if vectors.shape[-1:] != (3,):
+        raise InputError(f"directions must have shape (..., 3), got {vectors.shape}")
+    return vectors
+
+
+def camera_to_rig(directions: ArrayLike, camera: PinholeCamera) -> NDArray[np.float64]:
+    """Rotate directions from a camera's frame to the rig frame.
+
+    Parameters
+    ----------
+    directions : array_like, shape (..., 3)
+        Vectors in the camera frame: x to the image's right, y to the image's top, z toward the
+        camera (the frame of ``.lp`` files).
+    camera : PinholeCamera
+        The camera (an RTI capture's is straight above the object).
+
+    Returns
+    -------
+    ndarray, shape (..., 3), float64
+        The same vectors in the rig frame (a rotation: lengths are kept).
+    """
+    return _as_directions(directions) @ _camera_frame(camera)
+
+
+def rig_to_camera(directions: ArrayLike, camera: PinholeCamera) -> NDArray[np.float64]:
+    """Rotate directions from the rig frame to a camera's frame; inverse of :func:`camera_to_rig`.
+
+    Parameters
+    ----------
+    directions : array_like, shape (..., 3), rig frame
+    camera : PinholeCamera
+
+    Returns
+    -------
+    ndarray, shape (..., 3), float64
+        x to the image's right, y to the image's top, z toward the camera.
+    """
+    return _as_directions(directions) @ _camera_frame(camera).T

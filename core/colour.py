@@ -9,10 +9,11 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["REC709_LUMINANCE", "linear_to_srgb", "luminance", "srgb_to_linear"]
+__all__ = ["REC709_LUMINANCE", "REC709_WEIGHTS", "linear_to_srgb", "luminance", "srgb_to_linear"]
 
 #: Rec. 709 luminance weights of linear R, G, B (ITU-R BT.709-6, item 3.2).
-REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+REC709_WEIGHTS = (0.2126, 0.7152, 0.0722)
+REC709_LUMINANCE = np.array(REC709_WEIGHTS, dtype=np.float32)
 
 
 def srgb_to_linear(encoded: NDArray[np.floating]) -> NDArray[np.float32]:

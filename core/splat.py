@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numba
 import numpy as np
@@ -29,7 +30,9 @@ __all__ = [
     "camera_splats",
     "depth_at_points",
     "disk_bounds",
+    "for_each_cover",
     "shown_points",
+    "splat_weight",
     "zbuffer",
 ]
 
@@ -171,6 +174,64 @@ def disk_bounds(
     )
 
 
+@numba.njit(cache=True, inline="always")
+def splat_weight(d2: float, r2: float) -> float:
+    """Weight of a splat at squared distance ``d2`` from its centre, radius squared ``r2``.
+
+    1 - (d / r)^2, plus a floor so that the rim still counts where it is all that covers a
+    pixel.
+    """
+    return 1.0 - d2 / (r2 + 1e-12) + 1e-3
+
+
+@numba.njit(cache=True, inline="always")
+def for_each_cover(
+    cols: NDArray[np.float64],
+    rows: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    buffer: NDArray[np.float64],
+    tolerance: float,
+    nearer: bool,
+    visit: Any,
+    state: Any,
+) -> None:
+    """The one disk loop: call ``visit`` for every (point, pixel) a splat covers.
+
+    A pixel counts when its centre lies within the point's disk and the point passes the depth
+    test against ``buffer``: nearer than the buffer (``nearer``: building a z-buffer), or no
+    more than ``tolerance`` behind it (blending the front surface). ``visit(p, pixel, d2, r2,
+    z, state)`` gets the point, the pixel's flat index i W + j, the squared distance from the
+    centre, the squared radius and the point's depth; it returns True to leave the point's
+    remaining pixels out. Compiled into each caller (``inline``), so the visitor costs no call.
+    """
+    height, width = buffer.shape
+    for p in range(cols.shape[0]):
+        z = depth[p]
+        r2 = radius[p] * radius[p]
+        i0, i1, j0, j1 = disk_bounds(rows[p], cols[p], z, radius[p], height, width)
+        stop = False
+        for i in range(i0, i1 + 1):
+            dy = i + 0.5 - rows[p]
+            for j in range(j0, j1 + 1):
+                dx = j + 0.5 - cols[p]
+                d2 = dx * dx + dy * dy
+                front = z < buffer[i, j] if nearer else z <= buffer[i, j] + tolerance
+                if d2 <= r2 and front and visit(p, i * width + j, d2, r2, z, state):
+                    stop = True
+                    break
+            if stop:
+                break
+
+
+@numba.njit(cache=True, inline="always")
+def _nearest_depth(
+    p: int, pixel: int, d2: float, r2: float, z: float, buffer: NDArray[np.float64]
+) -> bool:
+    buffer[pixel] = z
+    return False
+
+
 @numba.njit(cache=True)
 def _zbuffer(
     cols: NDArray[np.float64],
@@ -179,17 +240,19 @@ def _zbuffer(
     radius: NDArray[np.float64],
     buffer: NDArray[np.float64],
 ) -> None:
-    height, width = buffer.shape
-    for p in range(cols.shape[0]):
-        z = depth[p]
-        r2 = radius[p] * radius[p]
-        i0, i1, j0, j1 = disk_bounds(rows[p], cols[p], z, radius[p], height, width)
-        for i in range(i0, i1 + 1):
-            dy = i + 0.5 - rows[p]
-            for j in range(j0, j1 + 1):
-                dx = j + 0.5 - cols[p]
-                if dx * dx + dy * dy <= r2 and z < buffer[i, j]:
-                    buffer[i, j] = z
+    flat = buffer.reshape(-1)
+    for_each_cover(cols, rows, depth, radius, buffer, 0.0, True, _nearest_depth, flat)
+
+
+@numba.njit(cache=True, inline="always")
+def _accumulate(p: int, pixel: int, d2: float, r2: float, z: float, state: Any) -> bool:
+    colours, total, weight = state
+    w = splat_weight(d2, r2)
+    total[pixel, 0] += w * colours[p, 0]
+    total[pixel, 1] += w * colours[p, 1]
+    total[pixel, 2] += w * colours[p, 2]
+    weight[pixel] += w
+    return False
 
 
 @numba.njit(cache=True)
@@ -204,22 +267,16 @@ def _blend(
     total: NDArray[np.float64],
     weight: NDArray[np.float64],
 ) -> None:
-    height, width = buffer.shape
-    for p in range(cols.shape[0]):
-        z = depth[p]
-        r2 = radius[p] * radius[p]
-        i0, i1, j0, j1 = disk_bounds(rows[p], cols[p], z, radius[p], height, width)
-        for i in range(i0, i1 + 1):
-            dy = i + 0.5 - rows[p]
-            for j in range(j0, j1 + 1):
-                dx = j + 0.5 - cols[p]
-                d2 = dx * dx + dy * dy
-                if d2 <= r2 and z <= buffer[i, j] + tolerance:
-                    w = 1.0 - d2 / (r2 + 1e-12) + 1e-3
-                    total[i, j, 0] += w * colours[p, 0]
-                    total[i, j, 1] += w * colours[p, 1]
-                    total[i, j, 2] += w * colours[p, 2]
-                    weight[i, j] += w
+    state = (colours, total.reshape(-1, 3), weight.reshape(-1))
+    for_each_cover(cols, rows, depth, radius, buffer, tolerance, False, _accumulate, state)
+
+
+@numba.njit(cache=True, inline="always")
+def _mark_shown(
+    p: int, pixel: int, d2: float, r2: float, z: float, shown: NDArray[np.bool_]
+) -> bool:
+    shown[p] = True
+    return True
 
 
 @numba.njit(cache=True)
@@ -232,16 +289,4 @@ def _shown(
     tolerance: float,
     shown: NDArray[np.bool_],
 ) -> None:
-    height, width = buffer.shape
-    for p in range(cols.shape[0]):
-        r2 = radius[p] * radius[p]
-        i0, i1, j0, j1 = disk_bounds(rows[p], cols[p], depth[p], radius[p], height, width)
-        for i in range(i0, i1 + 1):
-            dy = i + 0.5 - rows[p]
-            for j in range(j0, j1 + 1):
-                dx = j + 0.5 - cols[p]
-                if dx * dx + dy * dy <= r2 and depth[p] <= buffer[i, j] + tolerance:
-                    shown[p] = True
-                    break
-            if shown[p]:
-                break
+    for_each_cover(cols, rows, depth, radius, buffer, tolerance, False, _mark_shown, shown)

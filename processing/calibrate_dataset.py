@@ -36,17 +36,11 @@ from numpy.typing import NDArray
 
 from capture.dataset import Dataset, ImageRecord
 from capture.plan import SweepPlan
+from core.calibrated_camera import CalibratedCamera, CameraPose, Intrinsics, PoseDisagreement
 from core.camera_model import RigCamera
 from core.directions import direction_from_angles_deg
 from core.errors import DatasetError, RigError
-from processing.calibration import (
-    CalibratedCamera,
-    Calibration,
-    CameraPose,
-    Intrinsics,
-    LightCalibration,
-    PoseDisagreement,
-)
+from processing.calibration import Calibration, LightCalibration
 from processing.charuco import ChArUcoTarget, board_extrinsics, calibrate_intrinsics
 from processing.decode import decode_image
 from processing.light_falloff import WhiteReference, light_intensity_and_falloff

@@ -23,16 +23,10 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from core.calibrated_camera import CameraPose, Intrinsics
 from core.camera_model import PinholeCamera
 from core.errors import InputError
-from processing.calibration import (
-    CameraPose,
-    ImageInput,
-    Intrinsics,
-    gray8,
-    linear_luminance,
-    load_image,
-)
+from processing.calibration import ImageInput, gray8, linear_luminance, load_image
 
 __all__ = [
     "FLAT_BOARD",

@@ -34,16 +34,23 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import cv2
 import numpy as np
 import rawpy
-import tifffile
 from numpy.typing import NDArray
 
-from core.colour import srgb_to_linear
 from core.errors import DatasetError, InputError
+from core.image_io import (
+    EXR_SUFFIXES,
+    TIFF_SUFFIXES,
+    ImageFileError,
+    Transfer,
+    check_tiff_strips,
+    linear_from_pixels,
+    read_pixels,
+)
 
 __all__ = [
     "DEMOSAIC_ALGORITHMS",
@@ -58,15 +65,12 @@ RAW_SUFFIXES = frozenset(
     {".dng", ".cr2", ".cr3", ".crw", ".nef", ".nrw", ".arw", ".raf", ".orf", ".rw2", ".pef"}
     | {".srw", ".3fr", ".iiq", ".erf", ".kdc", ".mos", ".mrw", ".x3f", ".raw"}
 )
-TIFF_SUFFIXES = frozenset({".tif", ".tiff"})
+#: Read through OpenCV (:mod:`core.image_io`); Radiance HDR is a panorama format, not a capture's.
 OPENCV_SUFFIXES = frozenset({".png", ".jpg", ".jpeg"})
-EXR_SUFFIXES = frozenset({".exr"})
 #: Demosaicing algorithms offered for RAW files (LibRaw's names, lower case).
 DEMOSAIC_ALGORITHMS = ("linear", "vng", "ppg", "ahd", "dcb", "dht", "aahd")
 #: White balance multipliers (R, G, B, G2) applied to every RAW file: none.
 RAW_WHITE_BALANCE = (1.0, 1.0, 1.0, 1.0)
-
-Transfer = Literal["srgb", "linear"]
 
 
 class DecodeError(DatasetError):
@@ -138,10 +142,8 @@ def decode_image(
         raise InputError(f"transfer must be 'srgb' or 'linear', got {transfer!r}")
     if suffix in RAW_SUFFIXES:
         image = _decode_raw(file, demosaic)
-    elif suffix in TIFF_SUFFIXES:
-        image = _from_pixels(file, _read_tiff(file), transfer)
-    elif suffix in OPENCV_SUFFIXES:
-        image = _from_pixels(file, _read_with_opencv(file), transfer)
+    elif suffix in TIFF_SUFFIXES or suffix in OPENCV_SUFFIXES:
+        image = _from_pixels(file, _pixels(file), transfer)
     elif suffix in EXR_SUFFIXES:
         image = _decode_exr(file)
     else:
@@ -158,7 +160,10 @@ def decode_image(
 def _decode_raw(file: Path, demosaic: str) -> DecodedImage:
     if demosaic not in DEMOSAIC_ALGORITHMS:
         raise InputError(f"unknown demosaic {demosaic!r}; use one of {DEMOSAIC_ALGORITHMS}")
-    _check_tiff_strips(file)
+    try:
+        check_tiff_strips(file)
+    except ImageFileError as error:
+        raise DecodeError(str(error)) from error
     algorithm = getattr(rawpy.DemosaicAlgorithm, demosaic.upper())
     try:
         with rawpy.imread(str(file)) as raw:
@@ -195,61 +200,6 @@ def _decode_raw(file: Path, demosaic: str) -> DecodedImage:
     return DecodedImage(file, linear, np.ascontiguousarray(saturated), "raw")
 
 
-def _check_tiff_strips(file: Path) -> None:
-    """Refuse a TIFF-based file (DNG, NEF, CR2, TIFF) whose image data runs past its end.
-
-    LibRaw decodes a truncated uncompressed DNG without complaint (the missing rows read as
-    zeros), so the strip table is checked against the file size first.
-    """
-    with open(file, "rb") as handle:
-        magic = handle.read(4)
-    if magic not in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
-        return  # not TIFF-structured (CR3, RAF...): LibRaw checks what it can
-    size = file.stat().st_size
-    try:
-        with tifffile.TiffFile(file) as tiff:
-            for page in tiff.pages:
-                offsets = getattr(page, "dataoffsets", ())
-                counts = getattr(page, "databytecounts", ())
-                for offset, count in zip(offsets, counts, strict=False):
-                    if offset + count > size:
-                        raise DecodeError(
-                            f"{file}: truncated: image data ends at byte {offset + count}, the "
-                            f"file has {size} bytes"
-                        )
-    except DecodeError:
-        raise
-    except Exception as error:  # tifffile raises several types for broken structures
-        raise DecodeError(f"{file}: corrupt TIFF structure: {error}") from error
-
-
-def _read_tiff(file: Path) -> NDArray[Any]:
-    _check_tiff_strips(file)
-    try:
-        pixels = tifffile.imread(file)
-    except Exception as error:  # tifffile raises several types for broken files
-        raise DecodeError(
-            f"{file}: cannot decode as TIFF (truncated or corrupt?): {error}"
-        ) from error
-    return np.asarray(pixels)
-
-
-def _read_with_opencv(file: Path) -> NDArray[Any]:
-    data = file.read_bytes()
-    suffix = file.suffix.lower()
-    # OpenCV decodes a truncated JPEG without complaint; the end-of-image marker tells.
-    if suffix in (".jpg", ".jpeg") and data.rfind(b"\xff\xd9", max(0, len(data) - 4096)) < 0:
-        raise DecodeError(f"{file}: JPEG has no end-of-image marker (file truncated?)")
-    image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise DecodeError(f"{file}: cannot decode as {suffix[1:].upper()} (truncated or corrupt?)")
-    if image.ndim == 3 and image.shape[2] in (3, 4):
-        image = cv2.cvtColor(
-            image, cv2.COLOR_BGRA2RGB if image.shape[2] == 4 else cv2.COLOR_BGR2RGB
-        )
-    return np.asarray(image)
-
-
 def _rgb(file: Path, pixels: NDArray[Any]) -> NDArray[Any]:
     """(H, W) grey or (H, W, 3/4) colour pixels as (H, W, 3)."""
     if pixels.ndim == 2:
@@ -259,30 +209,33 @@ def _rgb(file: Path, pixels: NDArray[Any]) -> NDArray[Any]:
     raise DecodeError(f"{file}: expected a grey or RGB image, got pixels of shape {pixels.shape}")
 
 
+#: What 8- and 16-bit files hold: (encoding name, default transfer curve).
+_INTEGER_ENCODINGS: dict[Any, tuple[str, Transfer]] = {
+    np.dtype(np.uint8): ("srgb8", "srgb"),
+    np.dtype(np.uint16): ("linear16", "linear"),
+}
+
+
 def _from_pixels(file: Path, pixels: NDArray[Any], transfer: Transfer | None) -> DecodedImage:
     rgb = _rgb(file, pixels)
-    if rgb.dtype == np.uint8:
-        full, encoding, default = 255.0, "srgb8", "srgb"
-    elif rgb.dtype == np.uint16:
-        full, encoding, default = 65535.0, "linear16", "linear"
-    elif rgb.dtype in (np.float16, np.float32, np.float64):
+    if rgb.dtype in (np.float16, np.float32, np.float64):
         values = np.ascontiguousarray(rgb, dtype=np.float32)
         return DecodedImage(file, values, np.zeros(values.shape, dtype=bool), "float")
-    else:
+    if rgb.dtype not in _INTEGER_ENCODINGS:
         raise DecodeError(f"{file}: unsupported pixel type {rgb.dtype}")
-    saturated = np.ascontiguousarray(rgb >= int(full))
-    values = rgb.astype(np.float32) / np.float32(full)
-    if (transfer or default) == "srgb":
-        values = srgb_to_linear(values)
+    encoding, default = _INTEGER_ENCODINGS[rgb.dtype]
+    saturated = np.ascontiguousarray(rgb >= np.iinfo(rgb.dtype).max)
+    values = linear_from_pixels(rgb, transfer=transfer or default)
     return DecodedImage(file, np.ascontiguousarray(values), saturated, encoding)
 
 
 def _decode_exr(file: Path) -> DecodedImage:
-    from processing.panorama import read_image
-
-    try:
-        values = read_image(file)
-    except InputError as error:
-        raise DecodeError(str(error)) from error
-    rgb = np.ascontiguousarray(_rgb(file, values), dtype=np.float32)
+    rgb = np.ascontiguousarray(_rgb(file, _pixels(file)), dtype=np.float32)
     return DecodedImage(file, rgb, np.zeros(rgb.shape, dtype=bool), "float")
+
+
+def _pixels(file: Path) -> NDArray[Any]:
+    try:
+        return read_pixels(file)
+    except ImageFileError as error:
+        raise DecodeError(str(error)) from error

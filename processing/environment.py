@@ -15,8 +15,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.errors import InputError
+from core.image_io import read_linear
 from processing.lights import LightSet, disassemble_lights
-from processing.panorama import Panorama, adjust_panorama, read_image
+from processing.panorama import Panorama, adjust_panorama
 from processing.sampling import SamplerName, sample_environment
 
 __all__ = ["EnvironmentLighting", "LightingControls", "light_environment", "read_modulation_map"]
@@ -93,7 +94,7 @@ def read_modulation_map(path: str | os.PathLike[str]) -> NDArray[np.float32]:
     8/16-bit images are read without sRGB decoding (a painted mask means what it shows: 50 %
     grey halves the density); RGB maps use their luminance when resampled.
     """
-    image = read_image(path, transfer="linear")
+    image = read_linear(path, transfer="linear")
     if not np.all(np.isfinite(image)) or float(image.min()) < 0:
         raise InputError(f"{path}: modulation map values must be finite and non-negative")
     return image

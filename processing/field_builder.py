@@ -39,8 +39,9 @@ from capture.dataset import Dataset, ImageRecord
 from core.camera_model import RigCamera
 from core.errors import DatasetError, InputError
 from core.field_store import FieldStoreWriter
+from core.image_io import Transfer
 from core.splat import CameraSplats, camera_splats, shown_points
-from processing.decode import DecodedImage, Transfer, decode_image
+from processing.decode import DecodedImage, decode_image
 from processing.field_layout import CALIBRATION_KINDS, field_layout
 from processing.hdr import Exposure, merge_exposures
 from processing.interpolation import interpolation_weights

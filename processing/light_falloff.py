@@ -22,16 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from core.calibrated_camera import CalibratedCamera, as_calibrated
 from core.camera_model import PinholeCamera
 from core.directions import normalize
 from core.errors import InputError
-from processing.calibration import (
-    CalibratedCamera,
-    ImageInput,
-    as_calibrated,
-    linear_luminance,
-    load_image,
-)
+from processing.calibration import ImageInput, linear_luminance, load_image
 
 __all__ = ["LightIntensities", "WhiteReference", "light_intensity_and_falloff"]
 

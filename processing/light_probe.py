@@ -23,15 +23,10 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from core.calibrated_camera import CalibratedCamera, as_calibrated
 from core.camera_model import PinholeCamera
 from core.errors import InputError
-from processing.calibration import (
-    CalibratedCamera,
-    ImageInput,
-    as_calibrated,
-    linear_luminance,
-    load_image,
-)
+from processing.calibration import ImageInput, linear_luminance, load_image
 
 __all__ = ["MirrorSphere", "find_highlight", "light_directions_from_mirror_sphere"]
 

@@ -1,9 +1,10 @@
-"""Equirectangular environment panoramas: reading, validating and writing.
+"""Equirectangular environment panoramas: reading, validating and adjusting.
 
 In memory a panorama is linear float32 RGB radiance of shape (H, W, 3) with W = 2H, mapped to
-directions as ``core.directions`` says. Readers: 8/16-bit PNG and JPEG (sRGB-decoded to linear
-unless told otherwise), OpenEXR (any compression the OpenEXR library knows, DWAB included) and
-Radiance ``.hdr``. Writers: EXR (float32 RGB), PNG (sRGB, 8 or 16 bit) and ``.hdr``.
+directions as ``core.directions`` says. Files are read through :mod:`core.image_io`: 8/16-bit
+PNG and JPEG (sRGB-decoded to linear unless told otherwise), OpenEXR (any compression the
+OpenEXR library knows, DWAB included) and Radiance ``.hdr``; write one with
+:func:`core.image_io.write_linear`.
 """
 
 from __future__ import annotations
@@ -11,17 +12,14 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
 
 import cv2
 import numpy as np
-import OpenEXR
 from numpy.typing import NDArray
 
-from core.atomic import atomic_path
-from core.colour import linear_to_srgb, srgb_to_linear
 from core.directions import panorama_solid_angles, rotate_panorama_yaw
 from core.errors import InputError, PanoramaError
+from core.image_io import ImageFileError, Transfer, read_linear
 
 __all__ = [
     "NEGATIVE_TOLERANCE",
@@ -30,10 +28,7 @@ __all__ = [
     "adjust_panorama",
     "downsample_panorama",
     "panorama_from_array",
-    "read_image",
     "read_panorama",
-    "write_exr_rgba",
-    "write_panorama",
 ]
 
 PANORAMA_SUFFIXES = (".exr", ".hdr", ".pic", ".png", ".jpg", ".jpeg")
@@ -41,8 +36,6 @@ PANORAMA_SUFFIXES = (".exr", ".hdr", ".pic", ".png", ".jpg", ".jpeg")
 #: Negative values no larger than this fraction of the mean value are lossy-compression noise
 #: (DWA-compressed EXRs carry some) and are clamped to zero; larger negatives are refused.
 NEGATIVE_TOLERANCE = 1e-3
-
-Transfer = Literal["srgb", "linear"]
 
 
 @dataclass(frozen=True)
@@ -136,124 +129,17 @@ def read_panorama(
         Unreadable or truncated file, unknown format, not 2:1 (without ``resample``), NaN or
         infinite values, negative values beyond compression noise, or no light at all.
     """
-    rgb = read_image(path, transfer=transfer)
-    return panorama_from_array(rgb, source=str(path), resample=resample)
-
-
-def read_image(
-    path: str | os.PathLike[str], *, transfer: Transfer | None = None
-) -> NDArray[np.float32]:
-    """Read an image file as linear float32 (H, W, C) without panorama checks.
-
-    Formats and ``transfer`` as in :func:`read_panorama`. Raises :class:`PanoramaError` for a
-    missing, unknown, truncated or corrupt file.
-    """
     file = Path(path)
     suffix = file.suffix.lower()
     if suffix not in PANORAMA_SUFFIXES:
         raise PanoramaError(
             f"{file}: unknown image format {suffix!r}; use one of {PANORAMA_SUFFIXES}"
         )
-    if not file.is_file():
-        raise PanoramaError(f"{file}: no such file")
-    if suffix == ".exr":
-        return _read_exr(file)
-    return _read_with_opencv(file, transfer)
-
-
-def _read_exr(file: Path) -> NDArray[np.float32]:
     try:
-        with OpenEXR.File(str(file), separate_channels=True) as exr:
-            channels = {name: channel.pixels for name, channel in exr.channels().items()}
-    except Exception as error:  # the bindings raise RuntimeError or ValueError, by case
-        raise PanoramaError(
-            f"{file}: cannot read as OpenEXR (truncated or corrupt?): {error}"
-        ) from error
-    names = {name.rsplit(".", 1)[-1]: name for name in channels}  # accept layer prefixes
-    if all(c in names for c in "RGB"):
-        planes = [channels[names[c]] for c in "RGB"]
-    elif "Y" in names:
-        planes = [channels[names["Y"]]] * 3
-    else:
-        raise PanoramaError(f"{file}: no R, G, B (or Y) channels, found {sorted(channels)}")
-    return np.stack([np.asarray(p, dtype=np.float32) for p in planes], axis=-1)
-
-
-def _read_with_opencv(file: Path, transfer: Transfer | None) -> NDArray[np.float32]:
-    data = file.read_bytes()
-    suffix = file.suffix.lower()
-    # OpenCV decodes a truncated JPEG without complaint; the end-of-image marker tells.
-    if suffix in (".jpg", ".jpeg") and data.rfind(b"\xff\xd9", max(0, len(data) - 4096)) < 0:
-        raise PanoramaError(f"{file}: JPEG has no end-of-image marker (file truncated?)")
-    image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise PanoramaError(
-            f"{file}: cannot decode as {suffix[1:].upper()} (truncated or corrupt?)"
-        )
-    if image.ndim == 3:
-        image = cv2.cvtColor(
-            image, cv2.COLOR_BGRA2RGB if image.shape[2] == 4 else cv2.COLOR_BGR2RGB
-        )
-    if image.dtype == np.uint8:
-        values = image.astype(np.float32) / 255.0
-    elif image.dtype == np.uint16:
-        values = image.astype(np.float32) / 65535.0
-    elif image.dtype == np.float32:
-        return np.asarray(image, dtype=np.float32)  # Radiance HDR: already linear
-    else:
-        raise PanoramaError(f"{file}: unsupported pixel type {image.dtype}")
-    if (transfer or "srgb") == "srgb":
-        return srgb_to_linear(values)
-    return values
-
-
-def write_panorama(
-    path: str | os.PathLike[str], rgb: NDArray[np.floating], *, bits: Literal[8, 16] = 8
-) -> None:
-    """Write linear RGB (H, W, 3) to ``path``, atomically.
-
-    ``.exr``: float32 RGB, ZIP-compressed. ``.hdr``: Radiance RGBE. ``.png``: sRGB-encoded,
-    clipped to [0, 1], with ``bits`` per channel (tone-map before writing for display).
-    """
-    file = Path(path)
-    image = np.ascontiguousarray(np.asarray(rgb, dtype=np.float32)[:, :, :3])
-    suffix = file.suffix.lower()
-    if suffix not in (".exr", ".hdr", ".pic", ".png"):
-        raise PanoramaError(f"{file}: cannot write {suffix!r}; use .exr, .hdr or .png")
-    with atomic_path(file) as temporary:
-        if suffix == ".exr":
-            _write_exr(temporary, {"RGB": image})
-        elif suffix in (".hdr", ".pic"):
-            _imwrite(temporary, image[:, :, ::-1])
-        elif suffix == ".png":
-            scale = 255.0 if bits == 8 else 65535.0
-            encoded = np.round(linear_to_srgb(image) * scale)
-            _imwrite(temporary, encoded.astype(np.uint8 if bits == 8 else np.uint16)[:, :, ::-1])
-
-
-def write_exr_rgba(
-    path: str | os.PathLike[str], rgb: NDArray[np.floating], alpha: NDArray[np.floating]
-) -> None:
-    """Write linear RGB (H, W, 3) and alpha (H, W) as a float32 OpenEXR file, atomically."""
-    image = np.ascontiguousarray(np.asarray(rgb, dtype=np.float32)[:, :, :3])
-    coverage = np.ascontiguousarray(np.asarray(alpha, dtype=np.float32))
-    if coverage.shape != image.shape[:2]:
-        raise PanoramaError(
-            f"{path}: alpha {coverage.shape} does not match the image {image.shape}"
-        )
-    with atomic_path(path) as temporary:
-        _write_exr(temporary, {"RGB": image, "A": coverage})
-
-
-def _write_exr(path: Path, channels: dict[str, NDArray[np.float32]]) -> None:
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with OpenEXR.File(header, channels) as exr:
-        exr.write(str(path))
-
-
-def _imwrite(path: Path, bgr: NDArray[Any]) -> None:
-    if not cv2.imwrite(str(path), bgr):
-        raise PanoramaError(f"{path}: OpenCV could not write the image")
+        rgb = read_linear(file, transfer=transfer or "srgb")
+    except ImageFileError as error:
+        raise PanoramaError(str(error)) from error
+    return panorama_from_array(rgb, source=str(path), resample=resample)
 
 
 def adjust_panorama(panorama: Panorama, *, yaw_deg: float = 0.0, exposure: float = 1.0) -> Panorama:

@@ -37,21 +37,18 @@ from numpy.typing import ArrayLike, NDArray
 from tqdm import tqdm
 
 from core.atomic import atomic_path
-from core.camera_model import PinholeCamera
-from core.errors import DatasetError, InputError, PanoramaError
-from core.field_store import FieldStoreWriter
-from processing.panorama import read_image
-from processing.reflectance_field import ReflectanceField
+from core.camera_model import PinholeCamera, camera_to_rig, rig_to_camera
+from core.errors import DatasetError, InputError
+from core.field_store import FieldStoreWriter, ReflectanceField
+from core.image_io import ImageFileError, read_linear
 
 __all__ = [
     "NOMINAL_DISTANCE",
     "NOMINAL_FOV_DEG",
     "LightPositions",
-    "camera_to_rig",
     "export_lp",
     "import_rti",
     "read_lp",
-    "rig_to_camera",
     "rti_camera",
     "write_lp",
 ]
@@ -258,54 +255,6 @@ def write_lp(
     )
 
 
-def _camera_frame(camera: PinholeCamera) -> NDArray[np.float64]:
-    """Rows: the camera frame's x (right), y (up) and z (toward the camera) in the rig frame."""
-    right, up, forward = camera.axes()
-    return np.stack([right, up, -forward])
-
-
-def _as_directions(directions: ArrayLike) -> NDArray[np.float64]:
-    vectors = np.asarray(directions, dtype=np.float64)
-    if vectors.shape[-1:] != (3,):
-        raise InputError(f"directions must have shape (..., 3), got {vectors.shape}")
-    return vectors
-
-
-def camera_to_rig(directions: ArrayLike, camera: PinholeCamera) -> NDArray[np.float64]:
-    """Rotate directions from a camera's frame to the rig frame.
-
-    Parameters
-    ----------
-    directions : array_like, shape (..., 3)
-        Vectors in the camera frame: x to the image's right, y to the image's top, z toward the
-        camera (the frame of ``.lp`` files).
-    camera : PinholeCamera
-        The camera; for an RTI capture :func:`rti_camera` (straight above the object).
-
-    Returns
-    -------
-    ndarray, shape (..., 3), float64
-        The same vectors in the rig frame (a rotation: lengths are kept).
-    """
-    return _as_directions(directions) @ _camera_frame(camera)
-
-
-def rig_to_camera(directions: ArrayLike, camera: PinholeCamera) -> NDArray[np.float64]:
-    """Rotate directions from the rig frame to a camera's frame; inverse of :func:`camera_to_rig`.
-
-    Parameters
-    ----------
-    directions : array_like, shape (..., 3), rig frame
-    camera : PinholeCamera
-
-    Returns
-    -------
-    ndarray, shape (..., 3), float64
-        x to the image's right, y to the image's top, z toward the camera.
-    """
-    return _as_directions(directions) @ _camera_frame(camera).T
-
-
 def rti_camera(width: int, height: int) -> PinholeCamera:
     """The camera of an imported RTI view: straight above the object, nominal intrinsics.
 
@@ -340,8 +289,8 @@ def _image_path(folder: Path, name: str) -> Path:
 def _read_rti_image(path: Path, where: str) -> NDArray[np.float32]:
     """Linear float32 RGB (H, W, 3) of one RTI photograph; grey is repeated, alpha dropped."""
     try:
-        image = read_image(path)
-    except PanoramaError as error:
+        image = read_linear(path)
+    except ImageFileError as error:
         raise DatasetError(f"{where}: {error}") from error
     if image.ndim == 2:
         image = image[:, :, None]

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from core.atomic import atomic_path
 from core.errors import DatasetError
-from processing.reflectance_field import ReflectanceField
+from core.field_store import ReflectanceField
 from processing.sample_models import (
     BasisFit,
     Fit,

@@ -14,8 +14,8 @@ Models (``MODELS``)
     view, RTI) a photometric-stereo normal.
 ``lambert+ggx``
     f = rho_d / pi + F0 D(h) G1(wi) G1(wo) / (4 cos(theta_i) cos(theta_o)): RGB albedo, RGB
-    constant F0, GGX roughness alpha, separable Smith masking; the simulator's model, restated
-    here because ``processing`` may not import ``sim`` (``sim/materials.py``, tested equal).
+    constant F0, GGX roughness alpha, separable Smith masking: the lobe of :mod:`core.brdf`,
+    the simulator's model.
 ``ptm``, ``hsh2``, ``hsh3`` (pixel fields)
     Linear bases over the light direction in the camera frame: the 6-term biquadratic
     polynomial texture map (Malzbender et al. 2001) and hemispherical harmonics of order 2 and
@@ -94,14 +94,15 @@ from numpy.typing import NDArray
 from scipy.special import factorial, lpmv
 from tqdm import tqdm
 
+from core.brdf import specular_lobe
+from core.camera_model import rig_to_camera
 from core.colour import REC709_LUMINANCE
 from core.directions import fibonacci_sphere
 from core.errors import DatasetError, InputError
+from core.field_store import ReflectanceField
 from core.point_spacing import median_neighbour_distance
 from core.splat import depth_at_points, zbuffer
 from processing.interpolation import interpolation_weights
-from processing.reflectance_field import ReflectanceField
-from processing.rti import rig_to_camera
 
 __all__ = [
     "ALPHA_RANGE",
@@ -120,7 +121,6 @@ __all__ = [
     "fit_sample_models",
     "format_loo_table",
     "geometric_shadow_marks",
-    "ggx_lobe",
     "interpolation_loo",
     "leave_one_out_weights",
     "photometric_stereo",
@@ -553,22 +553,6 @@ def interpolation_loo(field: ReflectanceField, method: str, *, m: int = 3) -> Lo
 # Parametric fits: the numba kernel
 
 
-@numba.njit(cache=True, inline="always")
-def ggx_lobe(cos_i: float, cos_o: float, cos_h: float, alpha: float) -> float:
-    """D(h) G1(wi) G1(wo) / (4 cos_i cos_o) of GGX with separable Smith masking, 1/sr.
-
-    ``sim.materials.specular_lobe`` restated (processing may not import sim; the tests hold the
-    two equal); :mod:`render.model_relight` evaluates the fits with it.
-    """
-    if cos_h <= 0.0:
-        return 0.0
-    a2 = alpha * alpha
-    t = cos_h * cos_h * (a2 - 1.0) + 1.0
-    g1_i = 2.0 * cos_i / (cos_i + math.sqrt(a2 + (1.0 - a2) * cos_i * cos_i))
-    g1_o = 2.0 * cos_o / (cos_o + math.sqrt(a2 + (1.0 - a2) * cos_o * cos_o))
-    return a2 / (math.pi * t * t) * g1_i * g1_o / (4.0 * cos_i * cos_o)
-
-
 @numba.njit(cache=True)
 def _solve_pair(
     s11: float, s12: float, s22: float, r1: float, r2: float
@@ -646,7 +630,7 @@ def _objective(
         a1 = ci / math.pi
         a2 = 0.0
         if with_lobe:
-            a2 = ggx_lobe(ci, cos_o[k], cos_h[k], alpha) * ci
+            a2 = specular_lobe(ci, cos_o[k], cos_h[k], alpha) * ci
             d = cos_h[k] * cos_h[k] * (alpha * alpha - 1.0) + 1.0
             peak = max(peak, a4 / (d * d))  # D(h) / D(n)
         s11 += a1 * a1
@@ -738,7 +722,7 @@ def _light_sums(
         if ci <= 0.0:
             continue
         a1 = ci / math.pi
-        a2 = ggx_lobe(ci, cos_o[k], cos_h[k], alpha) * ci if with_lobe else 0.0
+        a2 = specular_lobe(ci, cos_o[k], cos_h[k], alpha) * ci if with_lobe else 0.0
         sums[t, 0] += a1 * a1
         sums[t, 1] += a1 * a2
         sums[t, 2] += a2 * a2

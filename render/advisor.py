@@ -39,9 +39,9 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from core.errors import InputError
+from core.field_store import ReflectanceField
 from processing.interpolation import interpolation_weights
 from processing.panorama import Panorama
-from processing.reflectance_field import ReflectanceField
 from processing.sample_models import PARAMETRIC_MODELS, SampleModels, fit_sample_models
 from render.light_weights import LightWeights, projection_light_weights
 from render.model_relight import EnvironmentLights, ModelRelighter, ModelRelightSettings

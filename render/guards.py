@@ -21,8 +21,8 @@ from core.camera_model import PinholeCamera
 from core.colour import luminance
 from core.directions import angle_between, panorama_directions, panorama_solid_angles
 from core.errors import InputError
+from core.field_store import ReflectanceField
 from processing.interpolation import mean_spacing_deg
-from processing.reflectance_field import ReflectanceField
 from processing.sample_models import ParametricFit, SampleModels, choose_model
 from render.model_relight import ModelRelightSettings
 from render.relighter import RelightSettings

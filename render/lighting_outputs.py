@@ -6,9 +6,10 @@ import os
 from pathlib import Path
 
 from core.atomic import write_json_atomic
+from core.image_io import write_srgb8
 from processing.environment import EnvironmentLighting, LightingControls, light_environment
 from processing.panorama import Panorama
-from render.overlay import disassembled_picture, sample_overlay, write_png
+from render.overlay import disassembled_picture, sample_overlay
 from render.tonemap import auto_exposure
 
 __all__ = ["write_lighting_outputs"]
@@ -27,9 +28,9 @@ def write_lighting_outputs(
     out.mkdir(parents=True, exist_ok=True)
     exposure = auto_exposure(lighting.panorama.rgb)
     write_json_atomic(out / "lights.json", lighting.to_json())
-    write_png(
+    write_srgb8(
         out / "overlay.png",
         sample_overlay(lighting.panorama.rgb, lighting.lights, exposure=exposure),
     )
-    write_png(out / "lights.png", disassembled_picture(lighting.lights, exposure=exposure))
+    write_srgb8(out / "lights.png", disassembled_picture(lighting.lights, exposure=exposure))
     return lighting

@@ -47,15 +47,16 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from core.brdf import specular_lobe
 from core.camera_model import PinholeCamera
 from core.colour import REC709_LUMINANCE
 from core.directions import panorama_directions, panorama_solid_angles
 from core.errors import InputError
+from core.field_store import ReflectanceField
 from core.point_spacing import point_spacing
 from processing.interpolation import interpolation_weights
 from processing.lights import LightSet, disassemble_lights
 from processing.panorama import Panorama, adjust_panorama
-from processing.reflectance_field import ReflectanceField
 from processing.sample_models import (
     BasisFit,
     ModelChoice,
@@ -64,7 +65,6 @@ from processing.sample_models import (
     choose_model,
     evaluate_basis,
     fit_sample_models,
-    ggx_lobe,
     shadow_mark_errors,
     with_geometric_visibility,
 )
@@ -392,7 +392,7 @@ def _shade_kernel(
                 cos_h = (nx * hx + ny * hy + nz * hz) / max(
                     math.sqrt(hx * hx + hy * hy + hz * hz), 1e-300
                 )
-                specular = ggx_lobe(cos_i, cos_o, cos_h, a)
+                specular = specular_lobe(cos_i, cos_o, cos_h, a)
                 r += (diffuse_r + f0[q, 0] * specular) * scale * rgb[d, 0]
                 g += (diffuse_g + f0[q, 1] * specular) * scale * rgb[d, 1]
                 b += (diffuse_b + f0[q, 2] * specular) * scale * rgb[d, 2]

@@ -16,8 +16,7 @@ from numpy.typing import NDArray
 
 from core.atomic import atomic_path
 from core.errors import InputError
-from processing.panorama import write_exr_rgba
-from render.overlay import write_png
+from core.image_io import write_exr, write_srgb8
 from render.tonemap import auto_exposure, to_uint8, tone_map
 
 __all__ = [
@@ -52,9 +51,9 @@ def write_image(
     target = Path(path)
     suffix = target.suffix.lower()
     if suffix == ".exr":
-        write_exr_rgba(target, np.asarray(rgb, np.float32), coverage.astype(np.float32))
+        write_exr(target, np.asarray(rgb, np.float32), coverage.astype(np.float32))
     elif suffix == ".png":
-        write_png(target, display_picture(rgb, coverage, exposure))
+        write_srgb8(target, display_picture(rgb, coverage, exposure))
     else:
         raise InputError(f"{target}: write an image as {' or '.join(IMAGE_SUFFIXES)}")
 

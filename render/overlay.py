@@ -2,19 +2,15 @@
 
 from __future__ import annotations
 
-import os
-
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from core.atomic import atomic_path
 from core.directions import panorama_pixel_from_direction
-from core.errors import InputError
 from processing.lights import LightSet
 from render.tonemap import to_uint8, tone_map
 
-__all__ = ["cell_borders", "disassembled_picture", "sample_overlay", "write_png"]
+__all__ = ["cell_borders", "disassembled_picture", "sample_overlay"]
 
 BORDER_RGB = (0, 230, 255)
 SAMPLE_RGB = (255, 0, 200)
@@ -50,14 +46,3 @@ def sample_overlay(
 def disassembled_picture(lights: LightSet, *, exposure: float) -> NDArray[np.uint8]:
     """Each Voronoi cell filled with its light's mean radiance, tone-mapped; (H, W, 3) uint8."""
     return to_uint8(tone_map(lights.to_panorama(), exposure=exposure))
-
-
-def write_png(path: str | os.PathLike[str], picture: NDArray[np.uint8]) -> None:
-    """Write an (H, W, 3) uint8 RGB picture as PNG, atomically."""
-    if picture.ndim != 3 or picture.shape[2] != 3 or picture.dtype != np.uint8:
-        raise InputError(
-            f"expected an (H, W, 3) uint8 picture, got {picture.shape} {picture.dtype}"
-        )
-    with atomic_path(path) as temporary:
-        if not cv2.imwrite(str(temporary), np.ascontiguousarray(picture[:, :, ::-1])):
-            raise InputError(f"{path}: OpenCV could not write the PNG")

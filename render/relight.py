@@ -22,9 +22,9 @@ from numpy.typing import NDArray
 from core.camera_model import PinholeCamera
 from core.directions import panorama_directions, panorama_solid_angles
 from core.errors import InputError
+from core.field_store import ReflectanceField
 from processing.interpolation import interpolation_weights
 from processing.panorama import downsample_panorama
-from processing.reflectance_field import ReflectanceField
 from render.light_weights import LightWeights
 
 __all__ = [

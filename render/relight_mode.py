@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from core.camera_model import PinholeCamera
+from core.field_store import ReflectanceField
 from processing.panorama import Panorama
-from processing.reflectance_field import ReflectanceField
 from processing.sample_model_store import models_for_field
 from processing.sample_models import SampleModels, choose_model, interpolation_loo
 from render.model_relight import ModelRelighter, ModelRelightSettings

@@ -17,10 +17,10 @@ from numpy.typing import NDArray
 
 from core.camera_model import PinholeCamera
 from core.errors import InputError
+from core.field_store import ReflectanceField
 from core.point_spacing import point_spacing
 from processing.lights import LightSet, disassemble_lights
 from processing.panorama import Panorama, adjust_panorama
-from processing.reflectance_field import ReflectanceField
 from processing.sampling import SamplerName, sample_environment
 from render.light_weights import (
     LightWeights,

@@ -4,12 +4,14 @@ For a fixed view, which pixels each visible point covers and with what weight do
 on the lighting. :func:`plan_splats` finds it once (a z-buffer of disks one point spacing wide,
 then every splat within a depth tolerance of the front surface, weighted by 1 - (d / r)^2 and
 normalised per pixel) and stores it as a sparse pixel x point matrix; :func:`splat` then costs
-one sparse product per frame. The disk kernels are :mod:`core.splat`, shared with the simulator.
+one sparse product per frame. The disk loop is :func:`core.splat.for_each_cover`, shared with
+the simulator.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numba
 import numpy as np
@@ -18,7 +20,7 @@ from numpy.typing import NDArray
 from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.point_spacing import point_spacing
-from core.splat import camera_splats, disk_bounds
+from core.splat import camera_splats, for_each_cover, splat_weight
 
 __all__ = ["SplatPlan", "plan_splats", "splat"]
 
@@ -94,6 +96,14 @@ def splat(plan: SplatPlan, radiance: NDArray[np.floating]) -> NDArray[np.float32
     return image.reshape(plan.height, plan.width, 3)
 
 
+@numba.njit(cache=True, inline="always")
+def _count_cover(
+    p: int, pixel: int, d2: float, r2: float, z: float, counts: NDArray[np.int64]
+) -> bool:
+    counts[pixel] += 1
+    return False
+
+
 @numba.njit(cache=True)
 def _count(
     cols: NDArray[np.float64],
@@ -104,16 +114,17 @@ def _count(
     tolerance: float,
     counts: NDArray[np.int64],
 ) -> None:
-    height, width = buffer.shape
-    for p in range(cols.shape[0]):
-        r2 = radius[p] * radius[p]
-        i0, i1, j0, j1 = disk_bounds(rows[p], cols[p], depth[p], radius[p], height, width)
-        for i in range(i0, i1 + 1):
-            dy = i + 0.5 - rows[p]
-            for j in range(j0, j1 + 1):
-                dx = j + 0.5 - cols[p]
-                if dx * dx + dy * dy <= r2 and depth[p] <= buffer[i, j] + tolerance:
-                    counts[i * width + j] += 1
+    for_each_cover(cols, rows, depth, radius, buffer, tolerance, False, _count_cover, counts)
+
+
+@numba.njit(cache=True, inline="always")
+def _fill_cover(p: int, pixel: int, d2: float, r2: float, z: float, state: Any) -> bool:
+    cursor, point_index, weight = state
+    k = cursor[pixel]
+    point_index[k] = p
+    weight[k] = splat_weight(d2, r2)
+    cursor[pixel] = k + 1
+    return False
 
 
 @numba.njit(cache=True)
@@ -128,20 +139,8 @@ def _fill(
     point_index: NDArray[np.int64],
     weight: NDArray[np.float64],
 ) -> None:
-    height, width = buffer.shape
-    for p in range(cols.shape[0]):
-        r2 = radius[p] * radius[p]
-        i0, i1, j0, j1 = disk_bounds(rows[p], cols[p], depth[p], radius[p], height, width)
-        for i in range(i0, i1 + 1):
-            dy = i + 0.5 - rows[p]
-            for j in range(j0, j1 + 1):
-                dx = j + 0.5 - cols[p]
-                d2 = dx * dx + dy * dy
-                if d2 <= r2 and depth[p] <= buffer[i, j] + tolerance:
-                    k = cursor[i * width + j]
-                    point_index[k] = p
-                    weight[k] = 1.0 - d2 / (r2 + 1e-12) + 1e-3
-                    cursor[i * width + j] = k + 1
+    state = (cursor, point_index, weight)
+    for_each_cover(cols, rows, depth, radius, buffer, tolerance, False, _fill_cover, state)
 
 
 @numba.njit(cache=True, parallel=True)

@@ -21,10 +21,8 @@ import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
-import cv2
-import numpy as np
-
 from core.errors import DeviceError, InputError
+from core.image_io import ImageFileError, read_pixels
 from rig.devices import Frame, LightState, RigStateSource, frame_metadata
 from rig.pose import RigPose
 
@@ -120,11 +118,10 @@ class ReplayCamera:
             if not path.is_file():
                 raise DeviceError(f"replay camera: {path} is missing")
             return Frame(path=path, metadata=metadata)
-        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if image is None:
-            raise DeviceError(f"replay camera: cannot read {path}")
-        if image.ndim == 3:
-            image = np.ascontiguousarray(image[:, :, 2::-1])  # BGR(A) -> RGB
+        try:
+            image = read_pixels(path)
+        except ImageFileError as error:
+            raise DeviceError(f"replay camera: cannot read {path}: {error}") from error
         return Frame(pixels=image, path=path, metadata=metadata)
 
     def close(self) -> None:

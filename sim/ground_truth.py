@@ -23,10 +23,10 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm import tqdm
 
+from core.brdf import specular_lobe
 from core.camera_model import PinholeCamera
 from core.directions import panorama_directions, panorama_solid_angles
 from core.errors import InputError
-from sim.materials import specular_lobe
 from sim.scenes import SurfaceSamples
 from sim.synthetic_camera import DirectionalLight, SyntheticImage, image_of_points, light_visibility
 
@@ -163,7 +163,7 @@ def _shade(
     use_visibility: bool,
     out: NDArray[np.float64],
 ) -> None:
-    # The model of sim.materials.brdf, evaluated point by point (tests hold the two equal).
+    # The model of core.brdf.brdf, evaluated point by point (tests hold the two equal).
     for p in numba.prange(points.shape[0]):
         vx = viewpoint[0] - points[p, 0]
         vy = viewpoint[1] - points[p, 1]

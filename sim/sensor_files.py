@@ -13,21 +13,19 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import cv2
 import numpy as np
 import tifffile
 from numpy.typing import NDArray
 
 from core.atomic import atomic_path
 from core.errors import InputError
+from core.image_io import write_linear16_tiff, write_srgb8
 from sim.sensor import BAYER_PATTERNS, Sensor, bayer_mosaic, expose, to_linear16, to_srgb8
 
 __all__ = [
     "PHOTO_SUFFIXES",
     "write_dng",
-    "write_linear16_tiff",
     "write_photo",
-    "write_srgb8",
 ]
 
 #: What each file suffix records: an ordinary photo, a linear TIFF, or the raw mosaic.
@@ -49,37 +47,6 @@ XYZ_TO_LINEAR_SRGB = (
 #: EXIF LightSource code of D65, used as the DNG calibration illuminant.
 ILLUMINANT_D65 = 21
 RATIONAL_DENOMINATOR = 1_000_000
-
-
-def _check_picture(path: Path, picture: NDArray[np.generic], dtype: type[np.generic]) -> None:
-    if picture.ndim != 3 or picture.shape[2] != 3 or picture.dtype != dtype:
-        raise InputError(
-            f"{path}: expected an (H, W, 3) {np.dtype(dtype).name} picture, got "
-            f"{picture.shape} {picture.dtype}"
-        )
-
-
-def write_srgb8(
-    path: str | os.PathLike[str], picture: NDArray[np.uint8], quality: int = 95
-) -> None:
-    """Write an (H, W, 3) uint8 sRGB picture as PNG or JPEG (by suffix), atomically."""
-    target = Path(path)
-    _check_picture(target, picture, np.uint8)
-    suffix = target.suffix.lower()
-    if suffix not in {".png", ".jpg", ".jpeg"}:
-        raise InputError(f"{target}: an 8-bit photo is written as .png or .jpg, not {suffix!r}")
-    params = [cv2.IMWRITE_JPEG_QUALITY, quality] if suffix != ".png" else []
-    with atomic_path(target) as temporary:
-        if not cv2.imwrite(str(temporary), np.ascontiguousarray(picture[:, :, ::-1]), params):
-            raise InputError(f"{target}: OpenCV could not write the image")
-
-
-def write_linear16_tiff(path: str | os.PathLike[str], picture: NDArray[np.uint16]) -> None:
-    """Write an (H, W, 3) uint16 linear RGB picture as an uncompressed TIFF, atomically."""
-    target = Path(path)
-    _check_picture(target, picture, np.uint16)
-    with atomic_path(target) as temporary:
-        tifffile.imwrite(temporary, picture, photometric="rgb", metadata=None)
 
 
 def _srational(values: tuple[float, ...]) -> tuple[int, ...]:

@@ -21,6 +21,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from core.brdf import specular_lobe
 from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.splat import (
@@ -31,7 +32,6 @@ from core.splat import (
     shown_points,
     zbuffer,
 )
-from sim.materials import specular_lobe
 from sim.scenes import SurfaceSamples
 
 __all__ = [
@@ -196,7 +196,7 @@ def _shade_one_light(
     reached: NDArray[np.bool_],
     out: NDArray[np.float64],
 ) -> None:
-    # sim.materials.brdf point by point, times cos(theta_i) and the irradiance (tests hold the
+    # core.brdf.brdf point by point, times cos(theta_i) and the irradiance (tests hold the
     # two equal); numpy's temporaries cost more than the arithmetic at 250k points.
     for p in numba.prange(points.shape[0]):
         if not reached[p]:

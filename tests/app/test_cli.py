@@ -58,9 +58,9 @@ def test_sample_controls(tmp_path: Path, courtyard_path: Path) -> None:
 
 def test_errors_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bad = tmp_path / "black.exr"
-    from processing.panorama import write_panorama
+    from core.image_io import write_linear
 
-    write_panorama(bad, np.zeros((8, 16, 3), dtype=np.float32))
+    write_linear(bad, np.zeros((8, 16, 3), dtype=np.float32))
     assert main(["sample", str(bad), "-o", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert str(bad) in err and "no light" in err
@@ -191,11 +191,11 @@ def test_relight_warns_where_interpolation_fails(
 def test_relight_warns_of_a_sun_over_sparse_lights_and_of_grazing_views(
     tmp_path: Path, small_field: Path, courtyard_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from processing.panorama import write_panorama
+    from core.image_io import write_linear
     from sim.skies import procedural_sky
 
     sky = tmp_path / "sky.exr"
-    write_panorama(sky, procedural_sky(64, sun_share=0.9))
+    write_linear(sky, procedural_sky(64, sun_share=0.9))
     base = ["relight", str(small_field), "--size", "48x48", "-o", str(tmp_path / "x.png")]
     assert main([*base, "--env", str(courtyard_path), "--view", "30,50"]) == 0  # saves a fit
     capsys.readouterr()

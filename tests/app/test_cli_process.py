@@ -11,9 +11,9 @@ import pytest
 from app.cli_process import add_process
 from capture.dataset import Dataset, ImageKey
 from core.errors import InputError
-from processing.reflectance_field import ReflectanceField
+from core.field_store import ReflectanceField
+from core.image_io import write_linear16_tiff
 from sim.scenes import build_scene
-from sim.sensor_files import write_linear16_tiff
 from tests.processing.test_field_builder import SIZE, _build, make_capture
 
 

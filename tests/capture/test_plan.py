@@ -541,7 +541,7 @@ def test_grid_plan_cameras_are_the_simulators(layout: str, count: int) -> None:
 
 @pytest.mark.parametrize("layout", ["grid", "hemisphere"])
 def test_grid_plan_lights_are_the_simulators(tmp_path: Path, layout: str) -> None:
-    from processing.reflectance_field import ReflectanceField
+    from core.field_store import ReflectanceField
     from sim.field import field_cameras, simulate_field
 
     sim_layout = "fibonacci" if layout == "hemisphere" else layout

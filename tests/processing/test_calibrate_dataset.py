@@ -22,9 +22,9 @@ from capture.dataset import Dataset
 from core.camera_model import RigCamera
 from core.directions import direction_from_angles_deg
 from core.errors import DatasetError
+from core.field_store import ReflectanceField
 from processing.calibrate_dataset import DEFAULT_BOARD, DEFAULT_SPHERE, calibrate_dataset
 from processing.calibration import Calibration
-from processing.reflectance_field import ReflectanceField
 from sim import simulated_camera
 
 #: Tolerances (measured: direction <= 0.18 deg, orientation <= 0.21 deg, distance <= 0.004 of

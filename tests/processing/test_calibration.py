@@ -8,15 +8,11 @@ import json
 import numpy as np
 import pytest
 
+from core.calibrated_camera import CalibratedCamera, CameraPose, Intrinsics
 from core.camera_model import PinholeCamera
 from core.directions import angle_between, direction_from_angles_deg, hemisphere_layout
 from core.errors import DatasetError, InputError
-from processing.calibration import (
-    CalibratedCamera,
-    Calibration,
-    CameraPose,
-    Intrinsics,
-)
+from processing.calibration import Calibration
 from processing.charuco import ChArUcoTarget, board_extrinsics, calibrate_intrinsics
 from processing.light_falloff import WhiteReference, light_intensity_and_falloff
 from processing.light_probe import MirrorSphere, light_directions_from_mirror_sphere

@@ -11,11 +11,11 @@ import pytest
 from numpy.typing import NDArray
 
 from core.colour import srgb_to_linear
+from core.image_io import write_exr, write_linear16_tiff, write_srgb8
 from processing.decode import DecodedImage, DecodeError, decode_image
 from processing.hdr import Exposure, hat, merge_exposures
-from processing.panorama import write_exr_rgba
 from sim.sensor import Sensor, bayer_mosaic, expose, linear_from_dn, to_linear16, to_srgb8
-from sim.sensor_files import write_dng, write_linear16_tiff, write_srgb8
+from sim.sensor_files import write_dng
 
 SENSOR = Sensor(noise=False, exposure_s=0.01)  # saturation radiance 20000 / 19000 = 1.05
 
@@ -85,7 +85,7 @@ def test_dng_through_rawpy(tmp_path: Path) -> None:
 
 def test_exr_is_read_as_stored(tmp_path: Path) -> None:
     rgb = scene().astype(np.float32)
-    write_exr_rgba(tmp_path / "a.exr", rgb, np.ones(rgb.shape[:2], np.float32))
+    write_exr(tmp_path / "a.exr", rgb, np.ones(rgb.shape[:2], np.float32))
     image = decode_image(tmp_path / "a.exr")
     np.testing.assert_array_equal(image.linear, rgb)
     assert image.encoding == "float" and not image.saturated.any()

@@ -15,17 +15,17 @@ from capture.dataset import Dataset, ImageKey
 from core.camera_model import RigCamera
 from core.directions import angles_deg_from_direction, hemisphere_layout
 from core.errors import DatasetError
+from core.field_store import ReflectanceField
+from core.image_io import write_linear16_tiff, write_srgb8
 from processing.decode import DecodeError
 from processing.field_builder import build_field
 from processing.field_layout import field_layout
 from processing.point_cloud import PointCloud, read_point_cloud
-from processing.reflectance_field import ReflectanceField
 from rig.devices import LightState
 from rig.pose import RigPose
 from sim.field import field_cameras, simulate_field
 from sim.scenes import build_scene
 from sim.sensor import Sensor
-from sim.sensor_files import write_linear16_tiff, write_srgb8
 from sim.simulated_camera import SimulatedCamera
 
 SIZE = 64

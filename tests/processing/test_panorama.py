@@ -8,7 +8,8 @@ import pytest
 
 from core.colour import linear_to_srgb, srgb_to_linear
 from core.errors import PanoramaError
-from processing.panorama import adjust_panorama, panorama_from_array, read_panorama, write_panorama
+from core.image_io import write_linear
+from processing.panorama import adjust_panorama, panorama_from_array, read_panorama
 
 
 def _image(h: int = 16) -> np.ndarray:
@@ -24,9 +25,9 @@ def test_reads_dwab_exr(name: str, courtyard_path: Path) -> None:
 
 def test_exr_and_hdr_round_trip(tmp_path: Path) -> None:
     image = _image() * 40
-    write_panorama(tmp_path / "a.exr", image)
+    write_linear(tmp_path / "a.exr", image)
     np.testing.assert_array_equal(read_panorama(tmp_path / "a.exr").rgb, image)
-    write_panorama(tmp_path / "a.hdr", image)
+    write_linear(tmp_path / "a.hdr", image)
     # RGBE shares one exponent per pixel: precision is relative to the largest channel.
     error = np.abs(read_panorama(tmp_path / "a.hdr").rgb - image).max(axis=2)
     assert np.all(error <= 0.01 * image.max(axis=2))
@@ -35,7 +36,7 @@ def test_exr_and_hdr_round_trip(tmp_path: Path) -> None:
 @pytest.mark.parametrize("bits", [8, 16])
 def test_png_is_srgb_decoded(tmp_path: Path, bits: int) -> None:
     image = _image() * 0.9
-    write_panorama(tmp_path / "a.png", image, bits=bits)
+    write_linear(tmp_path / "a.png", image, bits=bits)
     tolerance = 0.01 if bits == 8 else 1e-4
     np.testing.assert_allclose(read_panorama(tmp_path / "a.png").rgb, image, atol=tolerance)
 
@@ -58,7 +59,7 @@ def test_truncated_files_are_refused(tmp_path: Path, suffix: str) -> None:
     if suffix == ".jpg":
         cv2.imwrite(str(full), (_image(64) * 255).astype(np.uint8))
     else:
-        write_panorama(full, _image(64))
+        write_linear(full, _image(64))
     cut = tmp_path / f"cut{suffix}"
     data = full.read_bytes()
     cut.write_bytes(data[: len(data) // 2])
@@ -76,7 +77,7 @@ def test_missing_and_unknown_files(tmp_path: Path) -> None:
 
 def test_not_two_to_one_is_refused_unless_resampled(tmp_path: Path) -> None:
     image = np.ones((10, 30, 3), dtype=np.float32)
-    write_panorama(tmp_path / "a.exr", image)
+    write_linear(tmp_path / "a.exr", image)
     with pytest.raises(PanoramaError, match="twice as wide"):
         read_panorama(tmp_path / "a.exr")
     assert read_panorama(tmp_path / "a.exr", resample=True).rgb.shape == (10, 20, 3)

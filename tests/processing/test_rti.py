@@ -9,18 +9,16 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from core.camera_model import PinholeCamera
+from core.camera_model import PinholeCamera, camera_to_rig, rig_to_camera
 from core.errors import DatasetError, InputError
+from core.field_store import ReflectanceField
+from core.image_io import read_linear
 from core.sample_data import rti_capture_path
-from processing.panorama import read_image
-from processing.reflectance_field import ReflectanceField
 from processing.rti import (
     LightPositions,
-    camera_to_rig,
     export_lp,
     import_rti,
     read_lp,
-    rig_to_camera,
     rti_camera,
     write_lp,
 )
@@ -277,7 +275,7 @@ def test_the_real_capture_imports_as_a_pixel_field(loewenkopf: ReflectanceField)
     assert field.provenance["camera_intrinsics"]["nominal"] is True
     slab = field.camera_slab(0)
     for t in (0, 117, 239):
-        image = read_image(LOEWENKOPF / lights.files[t])
+        image = read_linear(LOEWENKOPF / lights.files[t])
         np.testing.assert_array_equal(slab[t].reshape(43, 64, 3), image)
     assert not list(loewenkopf.path.parent.glob(".*partial*"))
 
@@ -355,8 +353,8 @@ def test_grey_images_become_rgb_and_an_old_store_is_replaced(tmp_path: Path) -> 
     slab = field.camera_slab(0).astype(np.float32)
     np.testing.assert_array_equal(slab[..., 0], slab[..., 1])
     np.testing.assert_array_equal(slab[..., 0], slab[..., 2])
-    expected = read_image(tmp_path / "img" / "2.png")
-    assert expected.shape == (4, 6)  # read_image gives grey as (H, W)
+    expected = read_linear(tmp_path / "img" / "2.png")
+    assert expected.shape == (4, 6)  # read_linear gives grey as (H, W)
     np.testing.assert_allclose(slab[2, :, 0].reshape(4, 6), expected, rtol=1e-3, atol=1e-4)
     camera = field.cameras[0]
     expected_lights = camera_to_rig(read_lp(lp).directions, camera)

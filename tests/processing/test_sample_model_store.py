@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from core.errors import DatasetError
+from core.field_store import ReflectanceField
 from core.sample_data import rti_capture_path
-from processing.reflectance_field import ReflectanceField
 from processing.rti import import_rti
 from processing.sample_model_store import (
     default_models_path,

@@ -9,8 +9,7 @@ import pytest
 from core.camera_model import PinholeCamera
 from core.directions import direction_from_angles_deg, hemisphere_layout
 from core.errors import DatasetError, InputError
-from core.field_store import FieldStoreWriter
-from processing.reflectance_field import ReflectanceField
+from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.sample_models import (
     BasisFit,
     ParametricFit,
@@ -27,7 +26,6 @@ from processing.sample_models import (
     with_geometric_visibility,
 )
 from sim.field import field_cameras, simulate_field
-from sim.materials import specular_lobe
 from sim.scenes import build_scene
 from sim.synthetic_camera import DirectionalLight, light_visibility
 
@@ -110,16 +108,6 @@ def _peak_seen(field: ReflectanceField, alpha: float, fraction: float = 0.02) ->
             lit = (normals @ light > 0) & field.visibility[s]
             best = np.maximum(best, np.where(lit, ratio, 0.0))
     return best >= fraction
-
-
-def test_the_lobe_is_the_simulators() -> None:
-    from processing.sample_models import ggx_lobe
-
-    rng = np.random.default_rng(1)
-    for cos_i, cos_o, cos_h, alpha in rng.uniform(0.05, 1.0, size=(50, 4)):
-        assert ggx_lobe(cos_i, cos_o, cos_h, alpha) == pytest.approx(
-            specular_lobe(cos_i, cos_o, cos_h, alpha), rel=1e-12
-        )
 
 
 def test_fits_recover_the_glossy_material(
@@ -262,7 +250,7 @@ def test_photometric_stereo_recovers_lambertian_normals() -> None:
 def test_refined_normals_fit_a_glossy_pixel_field(tmp_path: Path) -> None:
     # A lambert+ggx pixel field whose normals must be found: photometric stereo is thrown off
     # by the highlights, refinement recovers the material.
-    from sim.materials import brdf
+    from core.brdf import brdf
 
     lights = hemisphere_layout(60)
     normal = np.array([0.25, -0.15, 1.0]) / np.linalg.norm([0.25, -0.15, 1.0])

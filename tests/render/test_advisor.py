@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from core.errors import InputError
+from core.field_store import ReflectanceField
 from processing.panorama import Panorama, read_panorama
-from processing.reflectance_field import ReflectanceField
 from render.advisor import Advice, Advisor, Candidate, capture_density
 from render.model_relight import ModelRelightSettings
 from render.relight_mode import open_relighter

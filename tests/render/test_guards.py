@@ -7,9 +7,8 @@ import pytest
 
 from core.camera_model import PinholeCamera
 from core.directions import hemisphere_layout
-from core.field_store import FieldStoreWriter
+from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.panorama import read_panorama
-from processing.reflectance_field import ReflectanceField
 from processing.sample_models import fit_sample_models
 from render.guards import (
     SUN_SHARE,

@@ -9,9 +9,8 @@ import pytest
 from core.camera_model import PinholeCamera
 from core.directions import hemisphere_layout, panorama_solid_angles
 from core.errors import InputError
-from core.field_store import FieldStoreWriter
+from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.panorama import panorama_from_array
-from processing.reflectance_field import ReflectanceField
 from processing.sample_models import (
     BasisFit,
     ParametricFit,

@@ -8,10 +8,9 @@ import pytest
 from core.camera_model import PinholeCamera
 from core.directions import hemisphere_layout
 from core.errors import InputError
-from core.field_store import FieldStoreWriter
+from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.lights import LightSet
 from processing.panorama import panorama_from_array
-from processing.reflectance_field import ReflectanceField
 from render.light_weights import (
     pixel_light_weights,
     projection_light_weights,

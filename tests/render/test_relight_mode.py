@@ -7,9 +7,8 @@ import pytest
 
 from core.camera_model import PinholeCamera
 from core.directions import hemisphere_layout
-from core.field_store import FieldStoreWriter
+from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.panorama import read_panorama
-from processing.reflectance_field import ReflectanceField
 from processing.sample_model_store import default_models_path
 from render.model_relight import ModelRelighter, ModelRelightSettings
 from render.relight_mode import MOST_ACCURATE_MODELS, most_accurate_mode, open_relighter

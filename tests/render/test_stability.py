@@ -15,9 +15,9 @@ from bench.stability import energy_matched_ldr, in_memory, measure, sensor_field
 from capture.dataset import Dataset, ImageKey
 from core.camera_model import PinholeCamera, RigCamera
 from core.errors import DatasetError
+from core.field_store import ReflectanceField
 from processing.field_layout import field_layout
 from processing.panorama import read_panorama
-from processing.reflectance_field import ReflectanceField
 from processing.sample_models import SampleModels, fit_sample_models
 from sim.field import field_cameras, simulate_field
 from sim.skies import procedural_sky

@@ -9,10 +9,10 @@ import OpenEXR
 import pytest
 
 from app.cli import main
+from core.brdf import brdf
 from core.camera_model import PinholeCamera
 from core.directions import panorama_solid_angles
 from sim.ground_truth import environment_lights, render_environment, shade_environment
-from sim.materials import brdf
 from sim.scenes import build_scene
 
 

@@ -10,6 +10,7 @@ import tifffile
 
 from app.cli import main
 from core.errors import InputError
+from core.image_io import write_linear16_tiff, write_srgb8
 from sim.sensor import (
     Sensor,
     auto_exposure_time,
@@ -19,7 +20,7 @@ from sim.sensor import (
     to_linear16,
     to_srgb8,
 )
-from sim.sensor_files import write_dng, write_linear16_tiff, write_srgb8
+from sim.sensor_files import write_dng
 
 
 def _ramp(height: int = 32, width: int = 48) -> np.ndarray:

@@ -3,10 +3,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from core.brdf import brdf
 from core.camera_model import PinholeCamera
 from core.directions import direction_from_angles_deg
 from core.errors import InputError
-from sim.materials import brdf
 from sim.scenes import TORUS_MAJOR, TORUS_MINOR, build_scene
 from sim.synthetic_camera import (
     DirectionalLight,

@@ -7,7 +7,7 @@ import pytest
 import zarr
 
 from core.errors import DatasetError, InputError
-from processing.reflectance_field import ReflectanceField
+from core.field_store import ReflectanceField
 from sim.field import field_cameras, simulate_field
 
 

@@ -1,0 +1,321 @@
+"""Image files: the one module that reads and writes EXR, Radiance HDR, PNG, JPEG and TIFF.
+
+Readers return the stored values (:func:`read_pixels`: uint8, uint16 or float32, RGB channel
+order, alpha dropped, grey kept as (H, W)) or linear float32 (:func:`read_linear`: integers
+scaled to [0, 1] and decoded through a transfer curve). Every write is atomic
+(:func:`core.atomic.atomic_path`): a file named by the project is never seen half-written.
+
+================ ========================================= =====================================
+format           read                                      write
+================ ========================================= =====================================
+OpenEXR          OpenEXR bindings, any compression (DWAB   float32 RGB or RGBA, ZIP
+                 included); R, G, B or Y channels          (:func:`write_exr`)
+Radiance .hdr    OpenCV, float32                           RGBE (:func:`write_linear`)
+PNG              OpenCV, 8 or 16 bit                       8-bit sRGB (:func:`write_srgb8`),
+                                                           8/16-bit sRGB of linear values
+                                                           (:func:`write_linear`), lossless
+                                                           frames (:func:`encode_lossless`)
+JPEG             OpenCV; a file without its end-of-image   8-bit sRGB (:func:`write_srgb8`)
+                 marker is refused (OpenCV would decode
+                 the truncated rest silently)
+TIFF             tifffile; strips past the end of the      16-bit linear RGB
+                 file are refused                          (:func:`write_linear16_tiff`), float
+                                                           frames (:func:`encode_lossless`)
+================ ========================================= =====================================
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+from typing import Any, Literal
+
+import cv2
+import numpy as np
+import OpenEXR
+import tifffile
+from numpy.typing import NDArray
+
+from core.atomic import atomic_path
+from core.colour import linear_to_srgb, srgb_to_linear
+from core.errors import InputError
+
+__all__ = [
+    "EXR_SUFFIXES",
+    "OPENCV_SUFFIXES",
+    "READABLE_SUFFIXES",
+    "TIFF_SUFFIXES",
+    "ImageFileError",
+    "Transfer",
+    "check_tiff_strips",
+    "encode_lossless",
+    "linear_from_pixels",
+    "read_linear",
+    "read_pixels",
+    "write_exr",
+    "write_linear",
+    "write_linear16_tiff",
+    "write_srgb8",
+]
+
+EXR_SUFFIXES = frozenset({".exr"})
+TIFF_SUFFIXES = frozenset({".tif", ".tiff"})
+#: Read through OpenCV (Radiance HDR included).
+OPENCV_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".hdr", ".pic"})
+READABLE_SUFFIXES = EXR_SUFFIXES | TIFF_SUFFIXES | OPENCV_SUFFIXES
+
+#: How 8/16-bit values encode light: the sRGB curve, or proportional to it.
+Transfer = Literal["srgb", "linear"]
+
+_TIFF_MAGIC = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
+
+
+class ImageFileError(InputError):
+    """An image file cannot be read (missing, unknown format, truncated, corrupt) or written."""
+
+
+def read_pixels(path: str | os.PathLike[str]) -> NDArray[Any]:
+    """The values an image file stores, in RGB order.
+
+    Parameters
+    ----------
+    path : an ``.exr``, ``.hdr``, ``.pic``, ``.png``, ``.jpg``, ``.jpeg``, ``.tif`` or ``.tiff``
+
+    Returns
+    -------
+    ndarray, shape (H, W) for grey or (H, W, 3) for colour (alpha dropped); uint8, uint16 or
+    float (EXR and HDR: float32 linear; TIFF: as stored)
+
+    Raises
+    ------
+    ImageFileError
+        Missing, unknown format, truncated or corrupt; the message names the file.
+    """
+    file = Path(path)
+    suffix = file.suffix.lower()
+    if suffix not in READABLE_SUFFIXES:
+        raise ImageFileError(
+            f"{file}: unknown image format {suffix!r}; use one of {sorted(READABLE_SUFFIXES)}"
+        )
+    if not file.is_file():
+        raise ImageFileError(f"{file}: no such file")
+    if suffix in EXR_SUFFIXES:
+        return _read_exr(file)
+    if suffix in TIFF_SUFFIXES:
+        return _read_tiff(file)
+    return _read_with_opencv(file)
+
+
+def linear_from_pixels(
+    pixels: NDArray[Any], *, transfer: Transfer = "srgb", where: str = "image"
+) -> NDArray[np.float32]:
+    """Stored values as linear float32: integers over their full scale, through ``transfer``.
+
+    Parameters
+    ----------
+    pixels : ndarray of uint8, uint16 or float; any shape
+    transfer : {"srgb", "linear"}, the curve of integer values (floats are linear as stored)
+    where : str, named in the error for another pixel type
+
+    Returns
+    -------
+    ndarray, same shape, float32 (1.0 = the integer format's full scale)
+    """
+    if pixels.dtype == np.uint8:
+        values = pixels.astype(np.float32) / np.float32(255.0)
+    elif pixels.dtype == np.uint16:
+        values = pixels.astype(np.float32) / np.float32(65535.0)
+    elif pixels.dtype in (np.float16, np.float32, np.float64):
+        return np.ascontiguousarray(pixels, dtype=np.float32)
+    else:
+        raise ImageFileError(f"{where}: unsupported pixel type {pixels.dtype}")
+    return srgb_to_linear(values) if transfer == "srgb" else values
+
+
+def read_linear(
+    path: str | os.PathLike[str], *, transfer: Transfer = "srgb"
+) -> NDArray[np.float32]:
+    """An image file as linear float32 (see :func:`read_pixels` and :func:`linear_from_pixels`).
+
+    ``transfer`` applies to 8- and 16-bit files; EXR, HDR and float TIFF are linear.
+    """
+    return linear_from_pixels(read_pixels(path), transfer=transfer, where=str(path))
+
+
+def check_tiff_strips(path: str | os.PathLike[str]) -> None:
+    """Refuse a TIFF-structured file (TIFF, DNG, NEF, CR2...) whose image data runs past its end.
+
+    Decoders read the missing rows of a truncated uncompressed file as zeros without complaint,
+    so the strip table is checked against the file size. Files that are not TIFF-structured
+    pass unchecked.
+    """
+    file = Path(path)
+    with open(file, "rb") as handle:
+        magic = handle.read(4)
+    if magic not in _TIFF_MAGIC:
+        return
+    size = file.stat().st_size
+    try:
+        with tifffile.TiffFile(file) as tiff:
+            for page in tiff.pages:
+                offsets = getattr(page, "dataoffsets", ())
+                counts = getattr(page, "databytecounts", ())
+                for offset, count in zip(offsets, counts, strict=False):
+                    if offset + count > size:
+                        raise ImageFileError(
+                            f"{file}: truncated: image data ends at byte {offset + count}, the "
+                            f"file has {size} bytes"
+                        )
+    except ImageFileError:
+        raise
+    except Exception as error:  # tifffile raises several types for broken structures
+        raise ImageFileError(f"{file}: corrupt TIFF structure: {error}") from error
+
+
+def _read_exr(file: Path) -> NDArray[np.float32]:
+    try:
+        with OpenEXR.File(str(file), separate_channels=True) as exr:
+            channels = {name: channel.pixels for name, channel in exr.channels().items()}
+    except Exception as error:  # the bindings raise RuntimeError or ValueError, by case
+        raise ImageFileError(
+            f"{file}: cannot read as OpenEXR (truncated or corrupt?): {error}"
+        ) from error
+    names = {name.rsplit(".", 1)[-1]: name for name in channels}  # accept layer prefixes
+    if all(c in names for c in "RGB"):
+        planes = [channels[names[c]] for c in "RGB"]
+    elif "Y" in names:
+        planes = [channels[names["Y"]]] * 3
+    else:
+        raise ImageFileError(f"{file}: no R, G, B (or Y) channels, found {sorted(channels)}")
+    return np.stack([np.asarray(p, dtype=np.float32) for p in planes], axis=-1)
+
+
+def _read_tiff(file: Path) -> NDArray[Any]:
+    check_tiff_strips(file)
+    try:
+        pixels = tifffile.imread(file)
+    except Exception as error:  # tifffile raises several types for broken files
+        raise ImageFileError(
+            f"{file}: cannot decode as TIFF (truncated or corrupt?): {error}"
+        ) from error
+    pixels = np.asarray(pixels)
+    return pixels[:, :, :3] if pixels.ndim == 3 and pixels.shape[2] == 4 else pixels
+
+
+def _read_with_opencv(file: Path) -> NDArray[Any]:
+    data = file.read_bytes()
+    suffix = file.suffix.lower()
+    # OpenCV decodes a truncated JPEG without complaint; the end-of-image marker tells.
+    if suffix in (".jpg", ".jpeg") and data.rfind(b"\xff\xd9", max(0, len(data) - 4096)) < 0:
+        raise ImageFileError(f"{file}: JPEG has no end-of-image marker (file truncated?)")
+    image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise ImageFileError(
+            f"{file}: cannot decode as {suffix[1:].upper()} (truncated or corrupt?)"
+        )
+    if image.ndim == 3 and image.shape[2] in (3, 4):
+        code = cv2.COLOR_BGRA2RGB if image.shape[2] == 4 else cv2.COLOR_BGR2RGB
+        image = cv2.cvtColor(image, code)
+    return np.asarray(image)
+
+
+def _check_picture(path: Path, picture: NDArray[Any], dtype: type[np.generic]) -> None:
+    if picture.ndim != 3 or picture.shape[2] != 3 or picture.dtype != dtype:
+        raise ImageFileError(
+            f"{path}: expected an (H, W, 3) {np.dtype(dtype).name} picture, got "
+            f"{picture.shape} {picture.dtype}"
+        )
+
+
+def _imwrite(path: Path, bgr: NDArray[Any], params: list[int] | None = None) -> None:
+    if not cv2.imwrite(str(path), np.ascontiguousarray(bgr), params or []):
+        raise ImageFileError(f"{path}: OpenCV could not write the image")
+
+
+def write_exr(
+    path: str | os.PathLike[str],
+    rgb: NDArray[np.floating],
+    alpha: NDArray[np.floating] | None = None,
+) -> None:
+    """Write linear RGB (H, W, 3), and alpha (H, W) when given, as float32 OpenEXR (ZIP)."""
+    image = np.ascontiguousarray(np.asarray(rgb, dtype=np.float32)[:, :, :3])
+    channels = {"RGB": image}
+    if alpha is not None:
+        coverage = np.ascontiguousarray(np.asarray(alpha, dtype=np.float32))
+        if coverage.shape != image.shape[:2]:
+            raise ImageFileError(
+                f"{path}: alpha {coverage.shape} does not match the image {image.shape}"
+            )
+        channels["A"] = coverage
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with atomic_path(path) as temporary, OpenEXR.File(header, channels) as exr:
+        exr.write(str(temporary))
+
+
+def write_linear(
+    path: str | os.PathLike[str], rgb: NDArray[np.floating], *, bits: Literal[8, 16] = 8
+) -> None:
+    """Write linear RGB (H, W, 3) by suffix.
+
+    ``.exr``: float32 RGB, ZIP-compressed. ``.hdr``/``.pic``: Radiance RGBE. ``.png``:
+    sRGB-encoded, clipped to [0, 1], with ``bits`` per channel (tone-map first for display).
+    """
+    file = Path(path)
+    image = np.ascontiguousarray(np.asarray(rgb, dtype=np.float32)[:, :, :3])
+    suffix = file.suffix.lower()
+    if suffix == ".exr":
+        write_exr(file, image)
+        return
+    if suffix not in (".hdr", ".pic", ".png"):
+        raise ImageFileError(f"{file}: cannot write {suffix!r}; use .exr, .hdr or .png")
+    with atomic_path(file) as temporary:
+        if suffix == ".png":
+            scale = 255.0 if bits == 8 else 65535.0
+            encoded = np.round(linear_to_srgb(image) * scale)
+            _imwrite(temporary, encoded.astype(np.uint8 if bits == 8 else np.uint16)[:, :, ::-1])
+        else:
+            _imwrite(temporary, image[:, :, ::-1])
+
+
+def write_srgb8(
+    path: str | os.PathLike[str], picture: NDArray[np.uint8], quality: int = 95
+) -> None:
+    """Write an (H, W, 3) uint8 sRGB picture as PNG or JPEG (by suffix, ``quality`` for JPEG)."""
+    target = Path(path)
+    _check_picture(target, picture, np.uint8)
+    suffix = target.suffix.lower()
+    if suffix not in {".png", ".jpg", ".jpeg"}:
+        raise ImageFileError(
+            f"{target}: an 8-bit picture is written as .png or .jpg, not {suffix!r}"
+        )
+    params = [cv2.IMWRITE_JPEG_QUALITY, quality] if suffix != ".png" else []
+    with atomic_path(target) as temporary:
+        _imwrite(temporary, picture[:, :, ::-1], params)
+
+
+def write_linear16_tiff(path: str | os.PathLike[str], picture: NDArray[np.uint16]) -> None:
+    """Write an (H, W, 3) uint16 linear RGB picture as an uncompressed TIFF."""
+    target = Path(path)
+    _check_picture(target, picture, np.uint16)
+    with atomic_path(target) as temporary:
+        tifffile.imwrite(temporary, picture, photometric="rgb", metadata=None)
+
+
+def encode_lossless(pixels: NDArray[Any]) -> tuple[str, bytes]:
+    """``(suffix, bytes)`` of a lossless file of RGB (or grey) pixels.
+
+    uint8 and uint16 become PNG (deterministic: the same pixels give the same bytes), floats a
+    float32 TIFF.
+    """
+    if pixels.dtype in (np.uint8, np.uint16):
+        image = pixels[:, :, ::-1] if pixels.ndim == 3 else pixels  # OpenCV writes BGR
+        ok, encoded = cv2.imencode(".png", np.ascontiguousarray(image))
+        if not ok:
+            raise ImageFileError(f"could not encode {pixels.shape} {pixels.dtype} pixels as PNG")
+        return ".png", encoded.tobytes()
+    if pixels.dtype.kind == "f":
+        buffer = io.BytesIO()
+        tifffile.imwrite(buffer, np.asarray(pixels, dtype=np.float32))
+        return ".tif", buffer.getvalue()
+    raise ImageFileError(f"pixels of dtype {pixels.dtype} cannot be stored; use uint8/16 or float")
