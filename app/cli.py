@@ -74,7 +74,7 @@ def _run_sample(args: argparse.Namespace) -> int:
         exposure=args.exposure,
     )
     lighting = write_lighting_outputs(panorama, controls, args.output)
-    lights = lighting.lights
+    lights = lighting.light_set()
     print(
         f"{lights.k} lights ({controls.method}) from {panorama.source} "
         f"({panorama.width}x{panorama.height}); total light "
@@ -124,6 +124,8 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     _add_camera_options(p)
     p.add_argument("--yaw", type=float, default=0.0, help="rotate the environment, degrees CCW")
     p.add_argument("--exposure", type=float, default=1.0, help="radiance scale (default 1)")
+    p.add_argument("--modulation", type=Path, help="image multiplying the sampling density of "
+                   "sampled lights (any resolution; zero forbids samples)")  # fmt: skip
     p.add_argument(
         "--sequence",
         choices=("turntable", "environment"),
@@ -143,7 +145,9 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
 
 
 def _run_relight(args: argparse.Namespace) -> int:
+    from processing.environment import read_modulation_map
     from processing.panorama import read_panorama
+    from processing.rti import open_field_or_rti
     from render.output import IMAGE_SUFFIXES, SEQUENCE_SUFFIXES
 
     suffix = args.output.suffix.lower()
@@ -151,37 +155,20 @@ def _run_relight(args: argparse.Namespace) -> int:
         raise RigError(
             f"{args.output}: write one of {', '.join(IMAGE_SUFFIXES + SEQUENCE_SUFFIXES)}"
         )
-    with contextlib.ExitStack() as stack:
-        field = _open_field_or_rti(args.field, stack)
-        return _relight_field(args, field, read_panorama(args.env), suffix)
+    panorama = read_panorama(args.env)
+    modulation = None if args.modulation is None else read_modulation_map(args.modulation)
+    with open_field_or_rti(args.field, progress=True) as field:
+        return _relight_field(args, field, panorama, modulation, suffix)
 
 
-def _open_field_or_rti(path: Path, stack: contextlib.ExitStack) -> Any:
-    """A field store, or an RTI capture imported into a temporary store for this run."""
-    import tempfile
-
-    from core.field_store import ReflectanceField
-    from processing.rti import import_rti
-
-    lp = path
-    if path.is_dir() and not (path / "zarr.json").exists():
-        found = sorted(path.glob("*.lp"))
-        if len(found) != 1:
-            raise RigError(f"{path}: neither a field store nor a folder with one .lp file")
-        lp = found[0]
-    if lp.suffix.lower() != ".lp":
-        return ReflectanceField.open(path)
-    scratch = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="rig-rti-")))
-    return import_rti(lp, scratch / "field.zarr", progress=True)
-
-
-def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: str) -> int:
-    from dataclasses import replace
-
+def _relight_field(
+    args: argparse.Namespace, field: Any, panorama: Any, modulation: Any, suffix: str
+) -> int:
     from core.camera_model import PinholeCamera
-    from render.output import IMAGE_SUFFIXES, display_picture, write_image, write_sequence
+    from processing.environment import adjust_environment
+    from render.output import IMAGE_SUFFIXES, write_image, write_sequence
     from render.relight_mode import open_relighter
-    from render.relighter import RelightSettings
+    from render.sequence import relight_sequence
 
     if field.sample_kind == "pixels":
         camera = field.cameras[0]
@@ -193,65 +180,55 @@ def _relight_field(args: argparse.Namespace, field: Any, panorama: Any, suffix: 
         camera = PinholeCamera(
             args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
         )
+    if suffix not in IMAGE_SUFFIXES:
+        if args.frames < 1:
+            raise RigError(f"--frames must be at least 1, got {args.frames}")
+        if args.sequence == "turntable" and field.sample_kind == "pixels":
+            raise RigError(f"{args.field} holds one fixed view: use --sequence environment")
     mode, models = _relight_mode(args, field)
-    for warning in _relight_warnings(field, camera, panorama, mode, models):
+    controls = mode.lighting_controls(
+        yaw_deg=args.yaw, exposure=args.exposure, modulation=modulation
+    )
+    relit = adjust_environment(panorama, controls)
+    for warning in _relight_warnings(field, camera, relit, mode, models):
         print(warning)
     relighter = open_relighter(field, mode, models)
+    lighting = {"yaw_deg": args.yaw, "exposure": args.exposure, "modulation": modulation}
     if suffix in IMAGE_SUFFIXES:
-        relighter.set_lighting(panorama, yaw_deg=args.yaw, exposure=args.exposure)
+        relighter.set_lighting(panorama, **lighting)
         relighter.set_view(camera)
         image = relighter.render()
         if args.renderer == "pyvista":
             _write_pyvista_picture(args, field, camera, image)
         else:
             write_image(args.output, image.rgb, image.coverage)
-        _report_relit(
-            args, image.holes, image.outside_fraction, not isinstance(mode, RelightSettings)
-        )
+        _report_relit(args, image.holes, image.outside_fraction, mode.uses_models)
         return 0
-    if args.frames < 1:
-        raise RigError(f"--frames must be at least 1, got {args.frames}")
-    if args.sequence == "turntable" and field.sample_kind == "pixels":
-        raise RigError(f"{args.field} holds one fixed view: use --sequence environment")
-    frames, exposure = [], None
-    relighter.set_lighting(panorama, yaw_deg=args.yaw, exposure=args.exposure)
-    relighter.set_view(camera)
-    from tqdm import tqdm
-
-    for frame in tqdm(range(args.frames), desc="frames", unit="frame"):
-        step = 360.0 * frame / args.frames
-        if args.sequence == "environment":
-            relighter.set_lighting(panorama, yaw_deg=args.yaw + step, exposure=args.exposure)
-        else:
-            relighter.set_view(replace(camera, azimuth_deg=(camera.azimuth_deg + step) % 360.0))
-        image = relighter.render()
-        if exposure is None:
-            from render.tonemap import auto_exposure
-
-            exposure = auto_exposure(image.rgb[image.coverage]) if image.coverage.any() else 1.0
-        frames.append(display_picture(image.rgb, image.coverage, exposure))
+    frames = relight_sequence(
+        relighter, panorama, camera, kind=args.sequence, frames=args.frames, progress=True,
+        **lighting,
+    )  # fmt: skip
     write_sequence(args.output, frames, fps=args.fps)
     print(f"{args.frames} frames ({args.sequence}) -> {args.output}")
     return 0
 
 
-def _relight_warnings(field: Any, camera: Any, panorama: Any, mode: Any, models: Any) -> list[Any]:
-    """What to expect of this relighting (render.guards.relight_warnings).
+def _relight_warnings(field: Any, camera: Any, relit: Any, mode: Any, models: Any) -> list[Any]:
+    """What to expect of this relighting (render.guards.relight_warnings), under the panorama
+    as relit (yaw and exposure applied).
 
     Interpolation modes without a fit in hand read the fit saved beside the field, if any: its
     lobe and held-out error inform the ghosting, sun and noise guards.
     """
-    import contextlib
 
     from processing.sample_model_store import default_models_path, read_sample_models
     from render.guards import relight_warnings
-    from render.relighter import RelightSettings
 
     saved = default_models_path(field.path)
-    if isinstance(mode, RelightSettings) and models is None and saved.exists():
+    if not mode.uses_models and models is None and saved.exists():
         with contextlib.suppress(RigError):
             models = read_sample_models(saved, field)
-    return relight_warnings(field, camera, panorama.rgb, mode, models)
+    return relight_warnings(field, camera, relit.rgb, mode, models)
 
 
 def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any]:
@@ -259,15 +236,15 @@ def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any]:
     from dataclasses import replace
 
     from processing.sample_model_store import models_for_field
-    from render.model_relight import ModelRelightSettings
-    from render.relight_mode import most_accurate_mode
+    from render.model_relight import ModelLightingMode, ModelRelightSettings
+    from render.relight_mode import MOST_ACCURATE_MODELS, most_accurate_mode
     from render.relighter import RelightSettings
 
     k = 64 if args.k is None else args.k
     if args.paper:
         return RelightSettings.paper_configuration(k=k), None
     if args.scheme == "model":
-        lighting = "grid" if args.k is None else "sampled"
+        lighting: ModelLightingMode = "grid" if args.k is None else "sampled"
         mode = ModelRelightSettings(
             model=args.model, lighting=lighting, k=k, sampler=args.sampler, grid_height=args.grid
         )
@@ -276,8 +253,8 @@ def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any]:
     if all(flag is None for flag in flags):
         choice = most_accurate_mode(field, models_path=args.models, progress=True)
         print(f"relighting mode: {choice.reason}")
-        if isinstance(choice.mode, ModelRelightSettings):
-            return replace(choice.mode, grid_height=args.grid), choice.models
+        if choice.mode == MOST_ACCURATE_MODELS:
+            return replace(MOST_ACCURATE_MODELS, grid_height=args.grid), choice.models
         return choice.mode, choice.models  # the fit still informs the warnings
     settings = RelightSettings(args.scheme or "sampled", k=k, sampler=args.sampler, m=args.m,
                                n=args.n)  # fmt: skip

@@ -22,7 +22,6 @@ from core.sample_data import panorama_path, rti_capture_path
 
 if TYPE_CHECKING:
     from processing.panorama import Panorama
-    from processing.sample_models import SampleModels
     from render.relight_mode import RelightMode
 
 __all__ = ["DEMO_KS", "run_demo"]
@@ -65,9 +64,9 @@ def run_demo(directory: str | Path, *, quick: bool = False) -> Path:
         start = time.perf_counter()
         lighting = write_lighting_outputs(panorama, controls, out / "sampling" / name)
         seconds = time.perf_counter() - start
-        total = ", ".join(f"{v:.4f}" for v in np.sum(lighting.lights.rgb, axis=0))
+        total = ", ".join(f"{v:.4f}" for v in np.sum(lighting.light_set().rgb, axis=0))
         lines.append(
-            f"| {name} | {lighting.lights.k} | {seconds:.3f} | {total} | "
+            f"| {name} | {lighting.light_set().k} | {seconds:.3f} | {total} | "
             f"[overlay](sampling/{name}/overlay.png), [lights](sampling/{name}/lights.png) |"
         )
     lines += ["", "Every run gathers the same total light: disassembling conserves energy.", ""]
@@ -91,6 +90,7 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
     from render.output import display_picture, write_sequence
     from render.relight_mode import most_accurate_mode, open_relighter
     from render.relighter import RelightSettings, best_settings
+    from render.sequence import relight_sequence
     from render.tonemap import auto_exposure
     from sim.field import field_cameras, simulate_field
     from sim.ground_truth import render_environment
@@ -128,7 +128,7 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
         methods: dict[str, tuple[str, RelightMode]] = {
             "paper": ("paper: TMED K=64, cosine 3x3, eq. 3", RelightSettings.paper_configuration()),
             "interpolated": ("eq. 2, barycentric", best_settings(field)),
-            "best": (f"chosen by LOO: {_mode_label(choice.mode, choice.models)}", choice.mode),
+            "best": (f"chosen by LOO: {choice.mode.describe(choice.models)}", choice.mode),
         }
         for name, (label, mode) in methods.items():
             relighter = open_relighter(field, mode, choice.models)
@@ -147,38 +147,20 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
             link = f"[png](relight/{scene}/{name}.png)"
             lines.append(f"| {scene} | {label} | {error:.2%} | {ms:.1f} | {link} |")
         relighter = open_relighter(field, choice.mode, choice.models)
-        relighter.set_view(view)
-        frames = []
-        for yaw in range(0, 360, 30):
-            relighter.set_lighting(panorama, yaw_deg=float(yaw))
-            image = relighter.render()
-            frames.append(display_picture(image.rgb, image.coverage, exposure))
+        frames = relight_sequence(relighter, panorama, view, frames=12, display_exposure=exposure)
         write_sequence(folder / "rotating-environment.gif", frames, fps=6)
         link = f"[gif](relight/{scene}/rotating-environment.gif)"
         lines.append(f"| {scene} | best, environment rotating | - | - | {link} |")
     return [*lines, ""]
 
 
-def _mode_label(mode: RelightMode, models: SampleModels) -> str:
-    """A short name of a relighting mode for the report."""
-    from processing.sample_models import choose_model
-    from render.model_relight import ModelRelightSettings
-
-    if isinstance(mode, ModelRelightSettings):
-        lights = f"grid {mode.grid_height}" if mode.lighting == "grid" else f"K={mode.k}"
-        return f"model {choose_model(models).chosen}, {lights}"
-    return f"{mode.scheme}, {mode.interpolation}"
-
-
 def _rti_demo(out: Path) -> list[str]:
     """Relight the real RTI capture under both bundled panoramas; returns the report's lines."""
-    import tempfile
-
     import numpy as np
 
     from core.image_io import write_srgb8
     from processing.panorama import read_panorama
-    from processing.rti import import_rti
+    from processing.rti import open_field_or_rti
     from processing.sample_models import choose_model, format_loo_table, interpolation_loo
     from render.output import display_picture
     from render.relight_mode import most_accurate_mode, open_relighter
@@ -191,8 +173,7 @@ def _rti_demo(out: Path) -> list[str]:
         "nearest neighbour):",
         "",
     ]
-    with tempfile.TemporaryDirectory(prefix="rig-demo-rti-") as scratch:
-        field = import_rti(lp, Path(scratch) / "field.zarr", progress=False)
+    with open_field_or_rti(lp) as field:
         choice = most_accurate_mode(field)
         relighter = open_relighter(field, choice.mode, choice.models)
         relighter.set_view(field.cameras[0])

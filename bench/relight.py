@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from core.camera_model import PinholeCamera
 from core.field_store import ReflectanceField
+from core.light_set import grid_lights
 from core.sample_data import PANORAMA_NAMES, PanoramaName, panorama_path
 from processing.panorama import Panorama, panorama_from_array, read_panorama
 from processing.sample_model_store import models_for_field
@@ -45,7 +46,7 @@ from render.relight_mode import MOST_ACCURATE_MODELS, RelightEngine, RelightMode
 from render.relighter import Relighter, RelightSettings, RelitImage
 from render.splat import splat
 from sim.field import field_cameras, simulate_field
-from sim.ground_truth import environment_lights, shade_environment, shade_environment_views
+from sim.ground_truth import shade_environment, shade_environment_views
 from sim.scenes import SurfaceSamples, build_scene, get_scene
 from sim.synthetic_camera import (
     SyntheticImage,
@@ -350,8 +351,8 @@ class Truth:
 def truth_of(
     samples: SurfaceSamples, rgb: NDArray[np.float32], camera: PinholeCamera, shadows: bool
 ) -> Truth:
-    directions, light = environment_lights(rgb, TRUTH_GRID)
-    radiance = shade_environment(samples, camera.position, directions, light, shadows=shadows)
+    lights = grid_lights(rgb, TRUTH_GRID)
+    radiance = shade_environment(samples, camera.position, lights, shadows=shadows)
     image = image_of_points(samples, camera, radiance)
     return Truth(image, radiance, camera_visibility(samples, camera))
 
@@ -366,9 +367,8 @@ def truths_of_views(
 
     Shadow maps are made once for all the views (``truth_of`` would redo them per view).
     """
-    directions, light = environment_lights(rgb, TRUTH_GRID)
     radiances = shade_environment_views(
-        samples, [c.position for c in cameras], directions, light, shadows=shadows
+        samples, [c.position for c in cameras], grid_lights(rgb, TRUTH_GRID), shadows=shadows
     )
     truths = []
     for camera, radiance in zip(cameras, radiances, strict=True):

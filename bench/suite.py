@@ -56,6 +56,7 @@ from core.colour import linear_to_srgb
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.sample_data import PanoramaName, panorama_path
+from processing.interpolation import InterpolationMethod
 from processing.panorama import Panorama, panorama_from_array, read_panorama
 from processing.sample_model_store import (
     default_models_path,
@@ -125,7 +126,7 @@ def ablation_methods(quick: bool = False) -> list[Method]:
     samplers: tuple[SamplerName, ...] = (
         ("median-cut",) if quick else ("ostromoukhov", "cdf", "median-cut")
     )
-    interpolations = () if quick else ("nearest", "rbf")
+    interpolations: tuple[InterpolationMethod, ...] = () if quick else ("nearest", "rbf")
     return [
         Method("paper", RelightSettings.paper_configuration(CHAIN_K)),
         Method("+ solid-angle weighting", solid),
@@ -366,8 +367,7 @@ def engine_bytes(engine: object) -> int:
 
 
 def _mode_dict(mode: RelightMode) -> dict[str, Any]:
-    engine = "models" if isinstance(mode, ModelRelightSettings) else "relighter"
-    return {"engine": engine, **asdict(mode)}
+    return {"engine": "models" if mode.uses_models else "relighter", **vars(mode)}
 
 
 def _views(field: ReflectanceField) -> dict[str, PinholeCamera]:
@@ -470,7 +470,7 @@ def measure_method(
     start = time.perf_counter()
     engine = open_relighter(run.field, method.mode, run.models)
     precompute = time.perf_counter() - start
-    models = isinstance(method.mode, ModelRelightSettings)
+    models = method.mode.uses_models
     if models:
         precompute += run.models_record["load_s"]
     timing_panorama = envs[next(iter(envs))].panorama
@@ -491,7 +491,7 @@ def measure_method(
         "label": method.label.strip(),
         "role": method.role,
         "mode": _mode_dict(method.mode),
-        "k": _k_of(method.mode),
+        "k": method.mode.sampled_k,
         "precompute_s": precompute,
         "models_fit_s": run.models_record.get("fit_s") if models else None,
         "models_load_s": run.models_record["load_s"] if models else None,
@@ -500,12 +500,6 @@ def measure_method(
         "memory_MB": engine_bytes(engine) / 1e6,
         "scores": scores,
     }
-
-
-def _k_of(mode: RelightMode) -> int | None:
-    if isinstance(mode, ModelRelightSettings):
-        return mode.k if mode.lighting == "sampled" else None
-    return mode.k if mode.scheme == "sampled" else None
 
 
 def _print_row(study: str, row: dict[str, Any]) -> None:

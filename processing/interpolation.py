@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numba
 import numpy as np
@@ -59,6 +59,8 @@ __all__ = [
     "POLICIES",
     "RBF_NEIGHBOURS",
     "DirectionWeights",
+    "InterpolationMethod",
+    "OutsidePolicy",
     "interpolation_weights",
     "mean_spacing_deg",
 ]
@@ -67,9 +69,11 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 #: Interpolation schemes of :func:`interpolation_weights`.
-METHODS = ("paper", "nearest", "barycentric", "rbf")
+InterpolationMethod = Literal["paper", "nearest", "barycentric", "rbf"]
+METHODS: tuple[InterpolationMethod, ...] = get_args(InterpolationMethod)
 #: Handling of queries outside the measured region.
-POLICIES = ("clamp", "zero")
+OutsidePolicy = Literal["clamp", "zero"]
+POLICIES: tuple[OutsidePolicy, ...] = get_args(OutsidePolicy)
 #: Measured directions an ``rbf`` weight row spans (one more sets the kernel's zero level).
 RBF_NEIGHBOURS = 8
 
@@ -143,11 +147,11 @@ class DirectionWeights:
 def interpolation_weights(
     measured: ArrayLike,
     queries: ArrayLike,
-    method: str,
+    method: InterpolationMethod,
     *,
     m: int = 3,
     width_deg: float | None = None,
-    policy: str = "clamp",
+    policy: OutsidePolicy = "clamp",
 ) -> DirectionWeights:
     """Weights of each query direction over the measured directions.
 

@@ -15,7 +15,6 @@ unimodal), so the radius, and hence the pruning, is exact.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numba
@@ -28,45 +27,11 @@ from core.directions import (
     panorama_row_solid_angles,
 )
 from core.errors import InputError
+from core.light_set import LightSet
 
-__all__ = ["LightSet", "disassemble_lights", "nearest_sample_labels"]
+__all__ = ["disassemble_lights", "nearest_sample_labels"]
 
 BLOCK = 8  # pixels per block side for the pruned nearest-sample search
-
-
-@dataclass(frozen=True)
-class LightSet:
-    """K directional lights that together carry all the light of an environment.
-
-    Attributes
-    ----------
-    directions : ndarray, shape (K, 3), float64
-        Unit vectors toward each light, rig frame.
-    rgb : ndarray, shape (K, 3), float64
-        Gathered light of each cell: sum of radiance x solid angle (radiance x sr).
-    solid_angle_sr : ndarray, shape (K,), float64
-        Solid angle of each light's Voronoi cell; sums to 4 pi.
-    labels : ndarray, shape (H, W), int32
-        Index of the light that owns each panorama pixel.
-    """
-
-    directions: NDArray[np.float64]
-    rgb: NDArray[np.float64]
-    solid_angle_sr: NDArray[np.float64]
-    labels: NDArray[np.int32]
-
-    @property
-    def k(self) -> int:
-        return int(self.directions.shape[0])
-
-    def mean_radiance(self) -> NDArray[np.float64]:
-        """Mean radiance of each cell, rgb / solid angle; shape (K, 3) (zero for empty cells)."""
-        area = self.solid_angle_sr[:, None]
-        return np.divide(self.rgb, area, out=np.zeros_like(self.rgb), where=area > 0)
-
-    def to_panorama(self) -> NDArray[np.float32]:
-        """The disassembled environment: each pixel filled with its cell's mean radiance."""
-        return self.mean_radiance().astype(np.float32)[self.labels]
 
 
 def _check_directions(directions: NDArray[Any]) -> NDArray[np.float64]:

@@ -25,9 +25,11 @@ record the camera's distance or field of view; nominal values are stored and mar
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
-from collections.abc import Sequence
+import tempfile
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -48,6 +50,7 @@ __all__ = [
     "LightPositions",
     "export_lp",
     "import_rti",
+    "open_field_or_rti",
     "read_lp",
     "rti_camera",
     "write_lp",
@@ -469,3 +472,34 @@ def export_lp(
         )
     directions = rig_to_camera(opened.light_directions, opened.cameras[camera_index])
     return write_lp(lp_path, image_names, directions)
+
+
+@contextlib.contextmanager
+def open_field_or_rti(
+    path: str | os.PathLike[str], *, progress: bool = False
+) -> Iterator[ReflectanceField]:
+    """Open a field store, or an RTI capture imported into a temporary store for the ``with``.
+
+    Parameters
+    ----------
+    path : a field store directory, an ``.lp`` file, or a folder holding exactly one ``.lp``
+    progress : bool, a progress bar while importing
+
+    Raises
+    ------
+    DatasetError
+        A folder that is neither a store nor holds one ``.lp`` file; what
+        :meth:`ReflectanceField.open` and :func:`import_rti` refuse.
+    """
+    where = Path(path)
+    lp = where
+    if where.is_dir() and not (where / "zarr.json").exists():
+        found = sorted(where.glob("*.lp"))
+        if len(found) != 1:
+            raise DatasetError(f"{where}: neither a field store nor a folder with one .lp file")
+        lp = found[0]
+    if lp.suffix.lower() != ".lp":
+        yield ReflectanceField.open(where)
+        return
+    with tempfile.TemporaryDirectory(prefix="rig-rti-") as scratch:
+        yield import_rti(lp, Path(scratch) / "field.zarr", progress=progress)

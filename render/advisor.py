@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass, replace
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,14 +41,15 @@ from tqdm import tqdm
 
 from core.errors import InputError
 from core.field_store import ReflectanceField
-from processing.interpolation import interpolation_weights
+from core.light_set import LightSet
+from processing.interpolation import InterpolationMethod, interpolation_weights
 from processing.panorama import Panorama
 from processing.sample_models import PARAMETRIC_MODELS, SampleModels, fit_sample_models
 from render.light_weights import LightWeights, projection_light_weights
-from render.model_relight import EnvironmentLights, ModelRelighter, ModelRelightSettings
+from render.model_relight import ModelRelighter, ModelRelightSettings
 from render.relight import blend_cameras, relight
 from render.relight_mode import RelightEngine, RelightMode
-from render.relighter import Relighter, RelightSettings
+from render.relighter import Predictor, RelightSettings
 
 __all__ = [
     "Advice",
@@ -59,9 +61,6 @@ __all__ = [
     "capture_density",
     "default_candidates",
 ]
-
-#: A light or view predictor: ("model", model name, 0) or ("interpolation", method, m or n).
-Predictor = tuple[str, str, int]
 
 #: Most interleaved hold-out folds of lights and of cameras (fewer positions: one fold each).
 MOST_FOLDS = 12
@@ -93,28 +92,18 @@ class Candidate:
 
     @property
     def light_predictor(self) -> Predictor:
-        """What predicts an unmeasured light: ("model", name, 0) or ("interpolation", method,
-        m), m the neighbours of the paper's cosine interpolation (0 for the other methods)."""
-        if isinstance(self.mode, ModelRelightSettings):
-            return ("model", self.mode.model, 0)
-        m = self.mode.m if self.mode.interpolation == "paper" else 0
-        return ("interpolation", self.mode.interpolation, m)
+        """What predicts an unmeasured light (see :data:`render.relighter.Predictor`)."""
+        return self.mode.predictors()[0]
 
     @property
     def view_predictor(self) -> Predictor:
-        """What predicts an uncaptured view: ("model", name, 0) or ("interpolation", method,
-        n), as :attr:`light_predictor`."""
-        if isinstance(self.mode, ModelRelightSettings):
-            return ("model", self.mode.model, 0)
-        n = self.mode.n if self.mode.view_interpolation == "paper" else 0
-        return ("interpolation", self.mode.view_interpolation, n)
+        """What predicts an uncaptured view (see :data:`render.relighter.Predictor`)."""
+        return self.mode.predictors()[1]
 
     @property
     def exact(self) -> RelightMode:
         """The same predictors with exact lighting (the reference of the lighting term)."""
-        if isinstance(self.mode, ModelRelightSettings):
-            return replace(self.mode, lighting="grid", grid_height=EXACT_GRID)
-        return replace(self.mode, scheme="pixels", paper=False)
+        return self.mode.exact_lighting(EXACT_GRID)
 
 
 def default_candidates(models: Sequence[str] = PARAMETRIC_MODELS) -> list[Candidate]:
@@ -351,7 +340,7 @@ class Advisor:
             chosen = np.random.default_rng(seed).choice(seen, min(samples, len(seen)), False)
             keep = np.sort(chosen)
         self.part = field.subset(samples=keep)
-        models = [c.mode.model for c in self.candidates if isinstance(c.mode, ModelRelightSettings)]
+        models = [c.light_predictor[1] for c in self.candidates if c.mode.uses_models]
         self._model_names = list(dict.fromkeys(models))
         self._models: SampleModels | None = None
         self.views_tested = field.sample_kind == "points" and s_count >= FEWEST_CAMERAS
@@ -415,12 +404,13 @@ class Advisor:
         for fold in light_folds:
             kept, held = fold.kept, fold.held
             for engine in fold.engines.values():
-                engine.set_lights(EnvironmentLights(directions[held], w[held]))
+                engine.set_lights(LightSet(directions[held], w[held]))
             # The light each kept light carries for the fold, per interpolation (T_kept, 3).
             carried = {}
             for key in light_keys:
                 if key[0] == "interpolation":
-                    a = interpolation_weights(directions[kept], directions[held], key[1],
+                    method = cast(InterpolationMethod, key[1])
+                    a = interpolation_weights(directions[kept], directions[held], method,
                                               m=key[2] or 3)  # fmt: skip
                     carried[key] = a.dense(len(kept)).T @ w[held]
             for s in range(field.shape[0]):
@@ -439,7 +429,7 @@ class Advisor:
         gathered = LightWeights(w[None].astype(np.float32), None, 0.0, "projection")
         for fold in camera_folds:
             for engine in fold.engines.values():
-                engine.set_lights(EnvironmentLights(directions.copy(), w))
+                engine.set_lights(LightSet(directions.copy(), w))
             for s in fold.held:
                 camera = field.cameras[int(s)]
                 truth = np.einsum("tc,tpc->pc", w, field.camera_slab(int(s)).astype(np.float64))
@@ -450,7 +440,8 @@ class Advisor:
                         image = fold.engines[key[1]].render()
                         views[key].add(image.radiance, truth, seen & image.needed)
                     else:
-                        blend = blend_cameras(fold.part, camera, key[1], n=key[2] or 3, needed=seen)
+                        method = cast(InterpolationMethod, key[1])
+                        blend = blend_cameras(fold.part, camera, method, n=key[2] or 3, needed=seen)
                         views[key].add(
                             relight(fold.part, gathered, blend), truth, seen & ~blend.holes
                         )
@@ -460,8 +451,8 @@ class Advisor:
         )
 
     def _engine(self, mode: RelightMode) -> RelightEngine:
-        if not isinstance(mode, ModelRelightSettings):
-            return Relighter(self.part, mode)
+        if not isinstance(mode, ModelRelightSettings):  # the model engines are shared below
+            return mode.open(self.part)
         if self._models is None:
             self._models = fit_sample_models(self.part, self._model_names)
         if mode.model not in self._shared:  # choosing shadow marks once per model

@@ -24,8 +24,7 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from processing.interpolation import mean_spacing_deg
 from processing.sample_models import ParametricFit, SampleModels, choose_model
-from render.model_relight import ModelRelightSettings
-from render.relighter import RelightSettings
+from render.relight_mode import RelightMode
 
 __all__ = [
     "RelightWarning",
@@ -464,28 +463,28 @@ def relight_warnings(
     field: ReflectanceField,
     camera: PinholeCamera,
     rgb: NDArray[np.floating],
-    mode: RelightSettings | ModelRelightSettings,
+    mode: RelightMode,
     models: SampleModels | None,
 ) -> list[RelightWarning]:
     """Every warning that applies to relighting ``field`` under ``rgb`` at ``camera``.
 
     The panorama and capture guards apply to every mode; the ones about interpolating the
-    measured lights and cameras (sun, ghosting, views outside or grazing, noise) only to
-    :class:`render.relighter.RelightSettings`, since the per-sample models evaluate the fitted
-    BRDF at any light and view and average the noise (bench.stability).
+    measured lights and cameras (sun, ghosting, views outside or grazing, noise) only to the
+    modes that interpolate (``not mode.uses_models``), since the per-sample models evaluate the
+    fitted BRDF at any light and view and average the noise (bench.stability).
 
     Parameters
     ----------
     field : ReflectanceField
     camera : PinholeCamera, the wanted view
     rgb : ndarray, shape (H, 2H, 3), the panorama as relit (after yaw and exposure)
-    mode : RelightSettings or ModelRelightSettings
+    mode : RelightMode
     models : SampleModels or None, the field's fit (its lobe and LOO error inform the guards)
     """
     found = [clipped_panorama_warning(rgb), empty_camera_warning(field)]
     nearest = np.argsort(angle_between(field.camera_directions, camera.direction[None, :]))
     found.append(saturated_capture_warning(field, [int(s) for s in nearest[:CHECKED_CAMERAS]]))
-    if isinstance(mode, RelightSettings):
+    if not mode.uses_models:
         alpha = None if models is None else fitted_lobe_alpha(models)
         points = field.sample_kind == "points"
         if points:
@@ -504,7 +503,7 @@ def relight_warnings(
                 rgb,
                 field.light_directions,
                 alpha,
-                interpolation=mode.interpolation,
+                interpolation=mode.predictors()[0][1],
                 camera_directions=views[0],
                 camera=views[1],
             )

@@ -27,8 +27,9 @@ from scipy.spatial import cKDTree
 from core.colour import REC709_LUMINANCE
 from core.directions import fibonacci_sphere, panorama_directions, panorama_solid_angles
 from core.errors import InputError
-from processing.interpolation import interpolation_weights
-from processing.lights import LightSet, disassemble_lights
+from core.light_set import LightSet
+from processing.interpolation import InterpolationMethod, OutsidePolicy, interpolation_weights
+from processing.lights import disassemble_lights
 from processing.panorama import downsample_panorama
 
 __all__ = [
@@ -73,10 +74,10 @@ def _energy_share(rgb: NDArray[np.float64], selected: NDArray[np.bool_]) -> floa
 def sampled_light_weights(
     lights: LightSet,
     measured: NDArray[np.float64],
-    method: str = "paper",
+    method: InterpolationMethod = "paper",
     *,
     m: int = 3,
-    policy: str = "clamp",
+    policy: OutsidePolicy = "clamp",
 ) -> LightWeights:
     """W of eq. 3: every sampled light's irradiance spread over the measured lights.
 
@@ -102,10 +103,10 @@ def pixel_light_weights(
     rgb: NDArray[np.floating],
     measured: NDArray[np.float64],
     normals: NDArray[np.floating] | None = None,
-    method: str = "paper",
+    method: InterpolationMethod = "paper",
     *,
     m: int = 3,
-    policy: str = "clamp",
+    policy: OutsidePolicy = "clamp",
     normal_bins: int | None = 4096,
     grid_height: int | None = 64,
 ) -> LightWeights:

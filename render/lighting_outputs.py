@@ -30,7 +30,7 @@ def write_lighting_outputs(
     write_json_atomic(out / "lights.json", lighting.to_json())
     write_srgb8(
         out / "overlay.png",
-        sample_overlay(lighting.panorama.rgb, lighting.lights, exposure=exposure),
+        sample_overlay(lighting.panorama.rgb, lighting.light_set(), exposure=exposure),
     )
-    write_srgb8(out / "lights.png", disassembled_picture(lighting.lights, exposure=exposure))
+    write_srgb8(out / "lights.png", disassembled_picture(lighting.light_set(), exposure=exposure))
     return lighting

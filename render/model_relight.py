@@ -41,6 +41,7 @@ import copy
 import math
 import time
 from dataclasses import dataclass, replace
+from typing import Literal, get_args
 
 import numba
 import numpy as np
@@ -50,13 +51,14 @@ from scipy.spatial import cKDTree
 from core.brdf import specular_lobe
 from core.camera_model import PinholeCamera
 from core.colour import REC709_LUMINANCE
-from core.directions import panorama_directions, panorama_solid_angles
 from core.errors import InputError
 from core.field_store import ReflectanceField
+from core.light_set import LightSet
 from core.point_spacing import point_spacing
+from processing.environment import EnvironmentLighting, LightingControls, light_environment
 from processing.interpolation import interpolation_weights
-from processing.lights import LightSet, disassemble_lights
-from processing.panorama import Panorama, adjust_panorama
+from processing.panorama import Panorama
+from processing.sample_model_store import models_for_field
 from processing.sample_models import (
     BasisFit,
     ModelChoice,
@@ -68,131 +70,34 @@ from processing.sample_models import (
     shadow_mark_errors,
     with_geometric_visibility,
 )
-from processing.sampling import SamplerName, sample_environment
-from render.relighter import RelitImage
+from processing.sampling import SamplerName
+from render.relighter import Predictor, RelitImage
 from render.splat import SplatPlan, plan_splats, splat
 
 __all__ = [
     "LIGHTING_MODES",
     "VISIBILITY_MODES",
-    "EnvironmentLights",
     "ModelLighting",
+    "ModelLightingMode",
     "ModelRelightSettings",
     "ModelRelighter",
+    "Visibility",
     "fill_sources",
-    "grid_lights",
     "prepare_lighting",
     "relight_models",
-    "sampled_lights",
 ]
 
+ModelLightingMode = Literal["sampled", "grid"]
 #: How an environment becomes directional lights: K sampled lights, or a pre-filtered grid.
-LIGHTING_MODES = ("sampled", "grid")
+LIGHTING_MODES: tuple[ModelLightingMode, ...] = get_args(ModelLightingMode)
+Visibility = Literal["auto", "measured", "geometry-outside", "geometry"]
 #: Where the shadow marks come from (point fields): the measured ones only (clamped outside the
 #: measured region), completed by geometric ones outside it, or everywhere; "auto" takes the
 #: geometric ones everywhere when they predict held-out measured marks better.
-VISIBILITY_MODES = ("auto", "measured", "geometry-outside", "geometry")
+VISIBILITY_MODES: tuple[Visibility, ...] = get_args(Visibility)
 #: "auto" trusts the geometry when its mark error plus the floor is below this share of
 #: interpolation's (the floor keeps unshadowed objects, where both are ~0, on measured marks).
 GEOMETRY_MARGIN, GEOMETRY_FLOOR = 0.9, 1e-3
-
-
-@dataclass(frozen=True)
-class EnvironmentLights:
-    """Directional lights standing for an environment.
-
-    Attributes
-    ----------
-    directions : ndarray, shape (D, 3), float64, unit vectors toward each light (rig frame)
-    rgb : ndarray, shape (D, 3), float64, light of each direction, radiance x sr
-    """
-
-    directions: NDArray[np.float64]
-    rgb: NDArray[np.float64]
-
-    def __post_init__(self) -> None:
-        if self.directions.ndim != 2 or self.directions.shape[1] != 3:
-            raise InputError(f"light directions must be (D, 3), got {self.directions.shape}")
-        if self.rgb.shape != self.directions.shape:
-            raise InputError(
-                f"light rgb {self.rgb.shape} does not match directions {self.directions.shape}"
-            )
-
-
-def grid_lights(rgb: NDArray[np.floating], grid_height: int = 32) -> EnvironmentLights:
-    """The panorama summed exactly into ``grid_height`` x 2 ``grid_height`` blocks.
-
-    Each block becomes one light at its energy-weighted centroid direction carrying the block's
-    radiance x solid angle (blocks without light are dropped): the simulator's ground-truth
-    pre-filter, so a grid of the same height matches it direction for direction.
-
-    Parameters
-    ----------
-    rgb : ndarray, shape (H, 2H, 3), linear radiance
-    grid_height : int, 1 <= grid_height <= H (blocks as equal as integer rows allow)
-    """
-    image = np.asarray(rgb, dtype=np.float64)
-    if image.ndim != 3 or image.shape[2] != 3 or image.shape[1] != 2 * image.shape[0]:
-        raise InputError(f"a panorama must have shape (H, 2H, 3), got {image.shape}")
-    height, width = image.shape[:2]
-    if not 1 <= grid_height <= height:
-        raise InputError(f"grid height must be in 1..{height}, got {grid_height}")
-    omega = panorama_solid_angles(height, width)
-    directions = panorama_directions(height, width)
-    energy = image * omega[:, :, None]
-    rows = (np.arange(grid_height) * height) // grid_height
-    cols = (np.arange(2 * grid_height) * width) // (2 * grid_height)
-    light = np.add.reduceat(np.add.reduceat(energy, rows, axis=0), cols, axis=1).reshape(-1, 3)
-    weight = energy.sum(axis=2) + 1e-30 * omega  # the geometric centre where there is no light
-    moments = np.add.reduceat(
-        np.add.reduceat(directions * weight[:, :, None], rows, axis=0), cols, axis=1
-    ).reshape(-1, 3)
-    centroids = moments / np.linalg.norm(moments, axis=1, keepdims=True)
-    keep = light.sum(axis=1) > 0
-    return EnvironmentLights(
-        np.ascontiguousarray(centroids[keep]), np.ascontiguousarray(light[keep])
-    )
-
-
-def sampled_lights(
-    rgb: NDArray[np.floating],
-    k: int = 128,
-    *,
-    sampler: SamplerName = "tmed",
-    seed: int = 0,
-    centroids: bool = True,
-) -> EnvironmentLights:
-    """K lights sampled from the panorama, each gathering its Voronoi cell's light.
-
-    Parameters
-    ----------
-    rgb : ndarray, shape (H, 2H, 3), linear radiance
-    k, sampler, seed : see :func:`processing.sampling.sample_environment`
-    centroids : bool
-        Place each light at its cell's energy-weighted centroid direction instead of the
-        sample (the paper's choice). The centroid keeps the cell's first moment, so anything
-        linear in the direction (a cosine that does not clip inside the cell) is exact; it
-        halves the error of glossy lobes under the courtyard at K = 128-256 (docs/models.md).
-    """
-    samples = sample_environment(rgb, k, method=sampler, seed=seed)
-    lights: LightSet = disassemble_lights(rgb, samples.directions)
-    directions = lights.directions
-    if centroids:
-        image = np.asarray(rgb, dtype=np.float64)
-        height, width = image.shape[:2]
-        weight = (image.sum(axis=2) * panorama_solid_angles(height, width)).ravel()
-        pixel_directions = panorama_directions(height, width).reshape(-1, 3)
-        labels = lights.labels.ravel()
-        moments = np.stack(
-            [np.bincount(labels, weight * pixel_directions[:, i], lights.k) for i in range(3)],
-            axis=1,
-        )
-        length = np.linalg.norm(moments, axis=1, keepdims=True)
-        directions = np.where(length > 0, moments / np.maximum(length, 1e-300), directions)
-    keep = lights.rgb.sum(axis=1) > 0
-    return EnvironmentLights(
-        np.ascontiguousarray(directions[keep]), np.ascontiguousarray(lights.rgb[keep])
-    )
 
 
 @dataclass(frozen=True)
@@ -201,7 +106,7 @@ class ModelLighting:
 
     Attributes
     ----------
-    lights : EnvironmentLights, D lights
+    lights : LightSet, the D lights that carry light
     visibility_indices, visibility_weights : ndarray, shape (D, 3), int64 / float64
         Barycentric weights (``clamp`` policy) of each light over the directions of the shadow
         marks (``SampleModels.visibility_directions``: the measured lights, plus geometric
@@ -214,7 +119,7 @@ class ModelLighting:
         Share of the lights' luminous energy from outside the measured region.
     """
 
-    lights: EnvironmentLights
+    lights: LightSet
     visibility_indices: NDArray[np.int64]
     visibility_weights: NDArray[np.float64]
     reaches: NDArray[np.bool_]
@@ -222,8 +127,9 @@ class ModelLighting:
     outside_fraction: float
 
 
-def prepare_lighting(models: SampleModels, lights: EnvironmentLights) -> ModelLighting:
+def prepare_lighting(models: SampleModels, lights: LightSet) -> ModelLighting:
     """Interpolation weights and basis integrals of ``lights`` for ``models``."""
+    lights = lights.nonempty()
     measured = models.light_directions
     weights = interpolation_weights(measured, lights.directions, "barycentric", policy="clamp")
     marks = weights
@@ -424,13 +330,16 @@ class ModelRelightSettings:
     """
 
     model: str = "auto"
-    lighting: str = "sampled"
+    lighting: ModelLightingMode = "sampled"
     k: int = 128
     sampler: SamplerName = "tmed"
     seed: int = 0
     grid_height: int = 32
-    visibility: str = "auto"
+    visibility: Visibility = "auto"
     spacing: float | None = None
+
+    #: Relights through the field's per-sample models.
+    uses_models = True
 
     def __post_init__(self) -> None:
         if self.lighting not in LIGHTING_MODES:
@@ -443,6 +352,61 @@ class ModelRelightSettings:
             )
         if self.spacing is not None and not self.spacing > 0:
             raise InputError(f"point spacing must be positive, got {self.spacing}")
+
+    @property
+    def sampled_k(self) -> int | None:
+        """K of the sampled lighting, None for the grid."""
+        return self.k if self.lighting == "sampled" else None
+
+    def lighting_controls(
+        self,
+        *,
+        yaw_deg: float = 0.0,
+        exposure: float = 1.0,
+        modulation: NDArray[np.floating] | None = None,
+    ) -> LightingControls:
+        """The lighting this mode takes from a panorama under the user's controls."""
+        if self.lighting == "grid":
+            return LightingControls(
+                lighting="grid",
+                grid_height=self.grid_height,
+                modulation=modulation,
+                yaw_deg=yaw_deg,
+                exposure=exposure,
+            )
+        return LightingControls(
+            lighting="sampled",
+            k=self.k,
+            method=self.sampler,
+            seed=self.seed,
+            modulation=modulation,
+            centroids=True,
+            yaw_deg=yaw_deg,
+            exposure=exposure,
+        )
+
+    def predictors(self) -> tuple[Predictor, Predictor]:
+        """What predicts an unmeasured light, and an uncaptured view: the model itself."""
+        return ("model", self.model, 0), ("model", self.model, 0)
+
+    def exact_lighting(self, grid_height: int) -> ModelRelightSettings:
+        """The same models under the panorama summed into a ``grid_height`` grid."""
+        return replace(self, lighting="grid", grid_height=grid_height)
+
+    def describe(self, models: SampleModels | None = None) -> str:
+        """A short name for reports (the chosen model's name when the fit is given)."""
+        name = self.model if models is None else choose_model(models).chosen
+        lights = f"grid {self.grid_height}" if self.lighting == "grid" else f"K={self.k}"
+        return f"model {name}, {lights}"
+
+    def open(
+        self, field_store: ReflectanceField, models: SampleModels | None = None
+    ) -> ModelRelighter:
+        """The engine of this mode; fits the field (or reads its saved fit) when ``models`` is
+        None."""
+        return ModelRelighter(
+            field_store, self, models if models is not None else models_for_field(field_store)
+        )
 
 
 class ModelRelighter:
@@ -502,9 +466,10 @@ class ModelRelighter:
                 unfitted |= (which == index) & ~fit.fitted
         self._unfitted = unfitted
         self._lighting: ModelLighting | None = None
+        self._environment: EnvironmentLighting | None = None
         self._view: tuple[PinholeCamera, SplatPlan | None, NDArray[np.bool_]] | None = None
 
-    def _visibility_mode(self) -> str:
+    def _visibility_mode(self) -> Visibility:
         """The shadow marks to use: the setting, or for "auto" the better predictor."""
         mode = self.settings.visibility
         if self.models.kind == "pixels" or not any(
@@ -524,19 +489,31 @@ class ModelRelighter:
         better = errors["geometry"] + GEOMETRY_FLOOR < GEOMETRY_MARGIN * errors["interpolated"]
         return "geometry" if better else "measured"
 
+    @property
+    def environment(self) -> EnvironmentLighting | None:
+        """The current lighting: the panorama as relit (yaw, exposure) and its lights."""
+        return self._environment
+
     def set_lighting(
-        self, panorama: Panorama, *, yaw_deg: float = 0.0, exposure: float = 1.0
+        self,
+        panorama: Panorama,
+        *,
+        yaw_deg: float = 0.0,
+        exposure: float = 1.0,
+        modulation: NDArray[np.floating] | None = None,
     ) -> float:
-        """Prepare the lights of a panorama; returns the seconds it took."""
+        """Light with a panorama under the user's controls; returns the seconds it took."""
         start = time.perf_counter()
-        s = self.settings
-        rgb = adjust_panorama(panorama, yaw_deg=yaw_deg, exposure=exposure).rgb
-        if s.lighting == "grid":
-            lights = grid_lights(rgb, s.grid_height)
-        else:
-            lights = sampled_lights(rgb, s.k, sampler=s.sampler, seed=s.seed)
-        self.set_lights(lights)
+        controls = self.settings.lighting_controls(
+            yaw_deg=yaw_deg, exposure=exposure, modulation=modulation
+        )
+        self.set_environment(light_environment(panorama, controls))
         return time.perf_counter() - start
+
+    def set_environment(self, lighting: EnvironmentLighting) -> None:
+        """Prepare the lights of a lighting (from :func:`light_environment`)."""
+        self.set_lights(lighting.light_set())
+        self._environment = lighting
 
     def with_lighting(self, settings: ModelRelightSettings) -> ModelRelighter:
         """This relighter with other lighting settings, sharing its prepared models.
@@ -554,11 +531,13 @@ class ModelRelighter:
         other = copy.copy(self)
         other.settings = settings
         other._lighting = None
+        other._environment = None
         return other
 
-    def set_lights(self, lights: EnvironmentLights) -> None:
+    def set_lights(self, lights: LightSet) -> None:
         """Light with given directional lights instead of a panorama (hold-out tests)."""
         self._lighting = prepare_lighting(self.models, lights)
+        self._environment = None
 
     def set_view(self, camera: PinholeCamera) -> float:
         """Plan the splats of a view (point fields); returns the seconds it took."""

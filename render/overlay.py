@@ -7,7 +7,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.directions import panorama_pixel_from_direction
-from processing.lights import LightSet
+from core.errors import InputError
+from core.light_set import LightSet
 from render.tonemap import to_uint8, tone_map
 
 __all__ = ["cell_borders", "disassembled_picture", "sample_overlay"]
@@ -33,6 +34,8 @@ def sample_overlay(
     """The tone-mapped panorama with Voronoi cell borders and sample points; (H, W, 3) uint8."""
     height, width = rgb.shape[:2]
     picture = to_uint8(tone_map(rgb, exposure=exposure))
+    if lights.labels is None:
+        raise InputError("the lights have no cells to draw: they did not come from a panorama")
     picture[cell_borders(lights.labels)] = BORDER_RGB
     rows, cols = panorama_pixel_from_direction(lights.directions, height, width)
     radius = max(2, round(height / 170))

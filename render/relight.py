@@ -23,7 +23,7 @@ from core.camera_model import PinholeCamera
 from core.directions import panorama_directions, panorama_solid_angles
 from core.errors import InputError
 from core.field_store import ReflectanceField
-from processing.interpolation import interpolation_weights
+from processing.interpolation import InterpolationMethod, OutsidePolicy, interpolation_weights
 from processing.panorama import downsample_panorama
 from render.light_weights import LightWeights
 
@@ -66,7 +66,7 @@ class ViewBlend:
 def blend_cameras(
     field: ReflectanceField,
     camera: PinholeCamera,
-    method: str = "paper",
+    method: InterpolationMethod = "paper",
     *,
     n: int = 3,
     needed: NDArray[np.bool_] | None = None,
@@ -241,10 +241,10 @@ def relight_pixels_literal(
     field: ReflectanceField,
     rgb: NDArray[np.floating],
     blend: ViewBlend,
-    method: str = "paper",
+    method: InterpolationMethod = "paper",
     *,
     m: int = 3,
-    policy: str = "clamp",
+    policy: OutsidePolicy = "clamp",
     grid_height: int | None = None,
 ) -> NDArray[np.float32]:
     """Paper eq. 2 as written: for each sample, the sum over every panorama pixel in the

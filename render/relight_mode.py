@@ -1,8 +1,11 @@
 """Which relighting a field gets: interpolation of its values, or its fitted per-sample models.
 
 Both engines, :class:`render.relighter.Relighter` (the paper's eq. 1-3 and our linear schemes)
-and :class:`render.model_relight.ModelRelighter`, take a lighting and a view and return a
-:class:`render.relighter.RelitImage`; :func:`open_relighter` makes the one a mode asks for.
+and :class:`render.model_relight.ModelRelighter`, take a lighting (from
+:func:`processing.environment.light_environment`) and a view and return a
+:class:`render.relighter.RelitImage`. A mode (:class:`RelightMode`: their settings) opens its
+engine, names the lighting it takes and what predicts unmeasured lights and views, so no caller
+asks which kind of mode it holds.
 :func:`most_accurate_mode` decides between them on the field's own measurements: the error of
 predicting each measured light from the others (leave one light out), for the chosen model and
 for barycentric interpolation over the lights, so the decision works on real captures, where no
@@ -15,13 +18,17 @@ import os
 from dataclasses import dataclass
 from typing import Protocol
 
+import numpy as np
+from numpy.typing import NDArray
+
 from core.camera_model import PinholeCamera
 from core.field_store import ReflectanceField
+from processing.environment import EnvironmentLighting, LightingControls
 from processing.panorama import Panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import SampleModels, choose_model, interpolation_loo
-from render.model_relight import ModelRelighter, ModelRelightSettings
-from render.relighter import Relighter, RelightSettings, RelitImage, best_settings
+from render.model_relight import ModelRelightSettings
+from render.relighter import Predictor, RelitImage, best_settings
 
 __all__ = [
     "MOST_ACCURATE_MODELS",
@@ -32,7 +39,71 @@ __all__ = [
     "open_relighter",
 ]
 
-RelightMode = RelightSettings | ModelRelightSettings
+
+class RelightEngine(Protocol):
+    """What both relighting engines do: a lighting and a view in, a relit image out."""
+
+    @property
+    def environment(self) -> EnvironmentLighting | None: ...
+
+    def set_lighting(
+        self,
+        panorama: Panorama,
+        *,
+        yaw_deg: float = 0.0,
+        exposure: float = 1.0,
+        modulation: NDArray[np.floating] | None = None,
+    ) -> float: ...
+
+    def set_environment(self, lighting: EnvironmentLighting) -> None: ...
+
+    def set_view(self, camera: PinholeCamera) -> float: ...
+
+    def render(self) -> RelitImage: ...
+
+
+class RelightMode(Protocol):
+    """A way to relight a field: :class:`RelightSettings` (interpolating the measured values)
+    or :class:`ModelRelightSettings` (through per-sample models)."""
+
+    @property
+    def uses_models(self) -> bool:
+        """Whether the engine relights through the field's fitted models."""
+        ...
+
+    @property
+    def sampled_k(self) -> int | None:
+        """K of a sampled lighting; None when every pixel (or block) of the panorama lights."""
+        ...
+
+    def lighting_controls(
+        self,
+        *,
+        yaw_deg: float = 0.0,
+        exposure: float = 1.0,
+        modulation: NDArray[np.floating] | None = None,
+    ) -> LightingControls:
+        """The lighting the mode takes from a panorama under the user's controls."""
+        ...
+
+    def predictors(self) -> tuple[Predictor, Predictor]:
+        """What predicts an unmeasured light, and an uncaptured view."""
+        ...
+
+    def exact_lighting(self, grid_height: int) -> RelightMode:
+        """The same predictors with (near) exact lighting: the reference of the lighting term."""
+        ...
+
+    def describe(self, models: SampleModels | None = None) -> str:
+        """A short name for reports."""
+        ...
+
+    def open(
+        self, field_store: ReflectanceField, models: SampleModels | None = None
+    ) -> RelightEngine:
+        """The engine of this mode (a model mode fits the field when ``models`` is None)."""
+        ...
+
 
 #: The model mode :func:`most_accurate_mode` picks: the model chosen by LOO, the panorama
 #: summed exactly into 64 x 128 blocks (docs/models.md: the sampled lights' discretisation,
@@ -40,28 +111,12 @@ RelightMode = RelightSettings | ModelRelightSettings
 MOST_ACCURATE_MODELS = ModelRelightSettings(model="auto", lighting="grid", grid_height=64)
 
 
-class RelightEngine(Protocol):
-    """What both relighting engines do."""
-
-    def set_lighting(
-        self, panorama: Panorama, *, yaw_deg: float = 0.0, exposure: float = 1.0
-    ) -> float: ...
-
-    def set_view(self, camera: PinholeCamera) -> float: ...
-
-    def render(self) -> RelitImage: ...
-
-
 def open_relighter(
     field: ReflectanceField, mode: RelightMode, models: SampleModels | None = None
 ) -> RelightEngine:
     """The engine for ``mode``; a model mode fits ``field`` (or reads its saved fit) when
     ``models`` is None."""
-    if isinstance(mode, ModelRelightSettings):
-        return ModelRelighter(
-            field, mode, models if models is not None else models_for_field(field)
-        )
-    return Relighter(field, mode)
+    return mode.open(field, models)
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from typing import Literal, get_args
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,10 +19,13 @@ from numpy.typing import NDArray
 from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.field_store import ReflectanceField
+from core.light_set import LightSet
 from core.point_spacing import point_spacing
-from processing.lights import LightSet, disassemble_lights
-from processing.panorama import Panorama, adjust_panorama
-from processing.sampling import SamplerName, sample_environment
+from processing.environment import EnvironmentLighting, LightingControls, light_environment
+from processing.interpolation import InterpolationMethod, OutsidePolicy
+from processing.panorama import Panorama
+from processing.sample_models import SampleModels
+from processing.sampling import SamplerName
 from render.light_weights import (
     LightWeights,
     pixel_light_weights,
@@ -38,14 +42,28 @@ from render.relight import (
 )
 from render.splat import SplatPlan, plan_splats, splat
 
-__all__ = ["SCHEMES", "RelightSettings", "Relighter", "RelitImage", "best_settings"]
+__all__ = [
+    "SCHEMES",
+    "Predictor",
+    "RelightSettings",
+    "Relighter",
+    "RelitImage",
+    "Scheme",
+    "best_settings",
+]
 
-SCHEMES = ("sampled", "pixels", "projection")
+Scheme = Literal["sampled", "pixels", "projection"]
+#: How the panorama lights the measured field (see :class:`RelightSettings`).
+SCHEMES: tuple[Scheme, ...] = get_args(Scheme)
+#: What predicts an unmeasured light or view: ("model", name, 0) or ("interpolation", method,
+#: m), m the neighbours of the paper's cosine interpolation (0 for the other methods).
+Predictor = tuple[str, str, int]
 
 
 @dataclass(frozen=True)
 class RelightSettings:
-    """How to relight (defaults: the paper's pipeline with our sampling improvements).
+    """How to relight by interpolating the measured values (defaults: the paper's pipeline with
+    our sampling improvements); a relighting mode (:class:`render.relight_mode.RelightMode`).
 
     Attributes
     ----------
@@ -58,18 +76,21 @@ class RelightSettings:
     normal_bins, grid_height : ``pixels`` only (see ``pixel_light_weights``)
     """
 
-    scheme: str = "sampled"
+    scheme: Scheme = "sampled"
     k: int = 64
     sampler: SamplerName = "tmed"
     seed: int = 0
     paper: bool = False
-    interpolation: str = "paper"
+    interpolation: InterpolationMethod = "paper"
     m: int = 3
-    view_interpolation: str = "paper"
+    view_interpolation: InterpolationMethod = "paper"
     n: int = 3
-    policy: str = "clamp"
+    policy: OutsidePolicy = "clamp"
     normal_bins: int | None = 4096
     grid_height: int | None = 64
+
+    #: Interpolation relights from the field's values; a fit only informs its warnings.
+    uses_models = False
 
     def __post_init__(self) -> None:
         if self.scheme not in SCHEMES:
@@ -79,6 +100,59 @@ class RelightSettings:
     def paper_configuration(cls, k: int = 64) -> RelightSettings:
         """The paper exactly: TMED on pixel luminance, Voronoi gathering, cosine m x n, eq. 3."""
         return cls(scheme="sampled", k=k, sampler="tmed", paper=True, interpolation="paper")
+
+    @property
+    def sampled_k(self) -> int | None:
+        """K of the sampled lighting, None when every panorama pixel lights."""
+        return self.k if self.scheme == "sampled" else None
+
+    def lighting_controls(
+        self,
+        *,
+        yaw_deg: float = 0.0,
+        exposure: float = 1.0,
+        modulation: NDArray[np.floating] | None = None,
+    ) -> LightingControls:
+        """The lighting this mode takes from a panorama under the user's controls."""
+        if self.scheme != "sampled":
+            return LightingControls(
+                lighting="panorama", modulation=modulation, yaw_deg=yaw_deg, exposure=exposure
+            )
+        return LightingControls(
+            lighting="sampled",
+            k=self.k,
+            method=self.sampler,
+            seed=self.seed,
+            paper=self.paper,
+            modulation=modulation,
+            yaw_deg=yaw_deg,
+            exposure=exposure,
+        )
+
+    def predictors(self) -> tuple[Predictor, Predictor]:
+        """What predicts an unmeasured light, and an uncaptured view."""
+        m = self.m if self.interpolation == "paper" else 0
+        n = self.n if self.view_interpolation == "paper" else 0
+        return ("interpolation", self.interpolation, m), (
+            "interpolation",
+            self.view_interpolation,
+            n,
+        )
+
+    def exact_lighting(self, grid_height: int) -> RelightSettings:
+        """The same interpolation with every panorama pixel as a light."""
+        del grid_height  # eq. 2 sums every pixel already
+        return replace(self, scheme="pixels", paper=False)
+
+    def describe(self, models: SampleModels | None = None) -> str:
+        """A short name for reports."""
+        del models
+        return f"{self.scheme}, {self.interpolation}"
+
+    def open(self, field_store: ReflectanceField, models: SampleModels | None = None) -> Relighter:
+        """The engine of this mode."""
+        del models  # interpolation relights from the field's values
+        return Relighter(field_store, self)
 
 
 def best_settings(field_store: ReflectanceField) -> RelightSettings:
@@ -126,7 +200,7 @@ class Relighter:
         self.field = field_store
         self.settings = settings or RelightSettings()
         self._lighting: LightWeights | None = None
-        self._lights: LightSet | None = None
+        self._environment: EnvironmentLighting | None = None
         self._view: tuple[ViewBlend, SplatPlan | None] | None = None
         self._view_field: ViewField | None = None
         self._camera_radiance: dict[int, NDArray[np.float32]] = {}
@@ -139,24 +213,41 @@ class Relighter:
     @property
     def lights(self) -> LightSet | None:
         """The sampled lights of the current lighting (``sampled`` scheme only)."""
-        return self._lights
+        return None if self._environment is None else self._environment.lights
+
+    @property
+    def environment(self) -> EnvironmentLighting | None:
+        """The current lighting: the panorama as relit (yaw, exposure) and its lights."""
+        return self._environment
 
     def set_lighting(
-        self, panorama: Panorama, *, yaw_deg: float = 0.0, exposure: float = 1.0
+        self,
+        panorama: Panorama,
+        *,
+        yaw_deg: float = 0.0,
+        exposure: float = 1.0,
+        modulation: NDArray[np.floating] | None = None,
     ) -> float:
-        """Compute the light weights of a panorama; returns the seconds it took."""
+        """Light with a panorama under the user's controls; returns the seconds it took."""
         start = time.perf_counter()
+        controls = self.settings.lighting_controls(
+            yaw_deg=yaw_deg, exposure=exposure, modulation=modulation
+        )
+        self.set_environment(light_environment(panorama, controls))
+        return time.perf_counter() - start
+
+    def set_environment(self, lighting: EnvironmentLighting) -> None:
+        """Compute the light weights of a lighting (from :func:`light_environment`)."""
         s = self.settings
-        rgb = adjust_panorama(panorama, yaw_deg=yaw_deg, exposure=exposure).rgb
+        rgb = lighting.panorama.rgb
         measured = self.field.light_directions
         if s.scheme == "sampled":
-            samples = sample_environment(rgb, s.k, method=s.sampler, seed=s.seed, paper=s.paper)
-            self._lights = disassemble_lights(rgb, samples.directions)
+            if lighting.lights is None:
+                raise InputError("the sampled scheme needs sampled lights, not a bare panorama")
             self._lighting = sampled_light_weights(
-                self._lights, measured, s.interpolation, m=s.m, policy=s.policy
+                lighting.lights, measured, s.interpolation, m=s.m, policy=s.policy
             )
         elif s.scheme == "pixels":
-            self._lights = None
             self._lighting = pixel_light_weights(
                 rgb,
                 measured,
@@ -168,10 +259,9 @@ class Relighter:
                 grid_height=s.grid_height,
             )
         else:
-            self._lights = None
             self._lighting = projection_light_weights(rgb, measured)
+        self._environment = lighting
         self._camera_radiance.clear()
-        return time.perf_counter() - start
 
     def set_view(self, camera: PinholeCamera) -> float:
         """Blend the cameras for a view and plan its splats; returns the seconds it took."""

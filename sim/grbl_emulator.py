@@ -34,7 +34,8 @@ from dataclasses import dataclass
 from types import TracebackType
 
 from rig.grbl import GantryAxes, GantryAxisConfig
-from sim.grbl_machine import GrblMachine, LineAssembler
+from sim.grbl_lines import LineAssembler
+from sim.grbl_machine import GrblMachine
 
 __all__ = ["FaultRule", "GrblEmulator", "GrblFaults", "LightState"]
 

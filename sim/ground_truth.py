@@ -6,9 +6,10 @@ Direct illumination only (no interreflection): that is the model every accuracy 
 project is measured against. The directions are either every panorama pixel (``grid_height =
 None``: exact to the panorama's resolution) or a pre-filtered grid: the panorama summed exactly
 (radiance x solid angle) into h x 2h blocks, each block a directional light at its
-energy-weighted centroid. The error the pre-filter adds is measured against the exact mode
-(tests, and the closing notes). Visibility V comes from one shadow map per direction
-(:func:`sim.synthetic_camera.light_visibility`); convex objects need none (V = [n . w > 0]).
+energy-weighted centroid (:func:`core.light_set.grid_lights`). The error the pre-filter adds is
+measured against the exact mode (tests, and the closing notes). Visibility V comes from one
+shadow map per direction (:func:`sim.synthetic_camera.light_visibility`); convex objects need
+none (V = [n . w > 0]).
 
 The panorama arrives as an array: reading files is the caller's job (``processing.panorama``).
 """
@@ -25,13 +26,11 @@ from tqdm import tqdm
 
 from core.brdf import specular_lobe
 from core.camera_model import PinholeCamera
-from core.directions import panorama_directions, panorama_solid_angles
-from core.errors import InputError
+from core.light_set import LightSet, grid_lights
 from sim.scenes import SurfaceSamples
 from sim.synthetic_camera import DirectionalLight, SyntheticImage, image_of_points, light_visibility
 
 __all__ = [
-    "environment_lights",
     "render_environment",
     "shade_environment",
     "shade_environment_views",
@@ -41,66 +40,24 @@ __all__ = [
 CHUNK = 64
 
 
-def environment_lights(
-    rgb: NDArray[np.floating], grid_height: int | None = None
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Directional lights equivalent to a panorama.
-
-    Parameters
-    ----------
-    rgb : ndarray, shape (H, W, 3), linear radiance, W = 2H
-    grid_height : int, optional
-        Rows of the pre-filter grid (h x 2h blocks); None for every pixel.
-
-    Returns
-    -------
-    directions : ndarray, shape (D, 3), unit vectors (blocks without light are dropped)
-    light : ndarray, shape (D, 3), radiance x solid angle of each direction
-    """
-    image = np.asarray(rgb, dtype=np.float64)
-    height, width = image.shape[:2]
-    omega = panorama_solid_angles(height, width)
-    directions = panorama_directions(height, width)
-    energy = image * omega[:, :, None]
-    if grid_height is None or grid_height >= height:
-        flat_dirs, flat_light = directions.reshape(-1, 3), energy.reshape(-1, 3)
-    else:
-        if grid_height < 1:
-            raise InputError(f"grid height must be at least 1, got {grid_height}")
-        rows = (np.arange(grid_height) * height) // grid_height
-        cols = (np.arange(2 * grid_height) * width) // (2 * grid_height)
-        flat_light = np.add.reduceat(np.add.reduceat(energy, rows, axis=0), cols, axis=1).reshape(
-            -1, 3
-        )
-        weight = energy.sum(axis=2) + 1e-30 * omega  # geometric centre where there is no light
-        moments = np.add.reduceat(
-            np.add.reduceat(directions * weight[:, :, None], rows, axis=0), cols, axis=1
-        ).reshape(-1, 3)
-        flat_dirs = moments / np.linalg.norm(moments, axis=1, keepdims=True)
-    keep = flat_light.sum(axis=1) > 0
-    return np.ascontiguousarray(flat_dirs[keep]), np.ascontiguousarray(flat_light[keep])
-
-
 def shade_environment(
     samples: SurfaceSamples,
     viewpoint: NDArray[np.floating],
-    directions: NDArray[np.float64],
-    light: NDArray[np.float64],
+    lights: LightSet,
     *,
     shadows: bool = True,
     progress: bool = False,
 ) -> NDArray[np.float64]:
-    """Radiance (P, 3) of every point toward ``viewpoint`` under directional lights (D, 3)."""
+    """Radiance (P, 3) of every point toward ``viewpoint`` under directional ``lights``."""
     return shade_environment_views(
-        samples, [viewpoint], directions, light, shadows=shadows, progress=progress
+        samples, [viewpoint], lights, shadows=shadows, progress=progress
     )[0]
 
 
 def shade_environment_views(
     samples: SurfaceSamples,
     viewpoints: Sequence[NDArray[np.floating]],
-    directions: NDArray[np.float64],
-    light: NDArray[np.float64],
+    lights: LightSet,
     *,
     shadows: bool = True,
     progress: bool = False,
@@ -109,6 +66,8 @@ def shade_environment_views(
 
     Shadow maps depend on the light only and are most of the cost of a non-convex scene.
     """
+    lit = lights.nonempty()
+    directions, light = lit.directions, lit.rgb
     out = [np.zeros((samples.count, 3)) for _ in viewpoints]
     args = (
         samples.points.astype(np.float64),
@@ -142,9 +101,9 @@ def render_environment(
     progress: bool = False,
 ) -> SyntheticImage:
     """The ground-truth image of ``samples`` under the panorama ``rgb`` seen by ``camera``."""
-    directions, light = environment_lights(rgb, grid_height)
+    lights = grid_lights(np.asarray(rgb), grid_height)
     radiance = shade_environment(
-        samples, camera.position, directions, light, shadows=shadows, progress=progress
+        samples, camera.position, lights, shadows=shadows, progress=progress
     )
     return image_of_points(samples, camera, radiance)
 

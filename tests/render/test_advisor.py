@@ -7,13 +7,14 @@ import pytest
 
 from core.errors import InputError
 from core.field_store import ReflectanceField
+from core.light_set import grid_lights
 from processing.panorama import Panorama, read_panorama
 from render.advisor import Advice, Advisor, Candidate, capture_density
 from render.model_relight import ModelRelightSettings
 from render.relight_mode import open_relighter
 from render.relighter import RelightSettings
 from sim.field import field_cameras, simulate_field
-from sim.ground_truth import environment_lights, shade_environment
+from sim.ground_truth import shade_environment
 from sim.scenes import build_scene
 
 CANDIDATES = [
@@ -58,13 +59,13 @@ def advice(advisor: Advisor, courtyard: Panorama) -> Advice:
 def _true_error(field: ReflectanceField, mode: object, panorama: Panorama) -> float:
     """Relative RMSE of the relit samples against the simulator at two captured cameras."""
     samples = build_scene("glossy-sphere", POINTS)
-    directions, light = environment_lights(panorama.rgb, 64)
+    lights = grid_lights(panorama.rgb, 64)
     engine = open_relighter(field, mode)  # type: ignore[arg-type]
     engine.set_lighting(panorama)
     error = energy = 0.0
     for s in (1, 5):
         camera = field.cameras[s]
-        truth = shade_environment(samples, camera.position, directions, light, shadows=False)
+        truth = shade_environment(samples, camera.position, lights, shadows=False)
         engine.set_view(camera)
         image = engine.render()
         seen = image.needed & field.visibility[s]

@@ -10,6 +10,8 @@ from core.camera_model import PinholeCamera
 from core.directions import hemisphere_layout, panorama_solid_angles
 from core.errors import InputError
 from core.field_store import FieldStoreWriter, ReflectanceField
+from core.light_set import LightSet, grid_lights
+from processing.environment import LightingControls, light_environment
 from processing.panorama import panorama_from_array
 from processing.sample_models import (
     BasisFit,
@@ -20,17 +22,14 @@ from processing.sample_models import (
     fit_sample_models,
 )
 from render.model_relight import (
-    EnvironmentLights,
     ModelRelighter,
     ModelRelightSettings,
-    grid_lights,
     prepare_lighting,
     relight_models,
-    sampled_lights,
 )
 from render.relighter import Relighter, RelightSettings
 from sim.field import field_cameras, simulate_field
-from sim.ground_truth import environment_lights, render_environment, shade_environment
+from sim.ground_truth import render_environment, shade_environment
 from sim.scenes import build_scene
 
 
@@ -59,10 +58,8 @@ def _panorama(seed: int) -> np.ndarray:
     return image
 
 
-def _one_light(
-    direction: np.ndarray, rgb: tuple[float, float, float] = (1, 1, 1)
-) -> EnvironmentLights:
-    return EnvironmentLights(direction[None, :].astype(np.float64), np.array([rgb], dtype=float))
+def _one_light(direction: np.ndarray, rgb: tuple[float, float, float] = (1, 1, 1)) -> LightSet:
+    return LightSet(direction[None, :].astype(np.float64), np.array([rgb], dtype=float))
 
 
 def _relative_rmse(a: np.ndarray, b: np.ndarray) -> float:
@@ -112,14 +109,14 @@ def test_relighting_is_linear_in_the_light(glossy: ReflectanceField, models: Sam
     camera = PinholeCamera(17.0, 52.0, width=64, height=64)
     a = grid_lights(_panorama(1), 8)
     b = grid_lights(_panorama(2), 8)
-    both = EnvironmentLights(
+    both = LightSet(
         np.concatenate([a.directions, b.directions]), np.concatenate([a.rgb, 2.5 * b.rgb])
     )
 
-    def relit(lights: EnvironmentLights) -> np.ndarray:
+    def relit(lights: LightSet) -> np.ndarray:
         return relight_models(models, choice, prepare_lighting(models, lights), camera)
 
-    scaled = EnvironmentLights(b.directions, 2.5 * b.rgb)
+    scaled = LightSet(b.directions, 2.5 * b.rgb)
     np.testing.assert_allclose(relit(both), relit(a) + relit(scaled), rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(relit(scaled), 2.5 * relit(b), rtol=1e-5, atol=1e-6)
 
@@ -169,9 +166,7 @@ def test_light_from_below_the_rig_is_evaluated_physically(
     below = np.array([0.3, 0.0, -1.0]) / np.linalg.norm([0.3, 0.0, -1.0])
     camera = PinholeCamera(0.0, 100.0, width=64, height=64)  # looking slightly up
     samples = build_scene("glossy-sphere", glossy.shape[2])
-    expected = shade_environment(
-        samples, camera.position, below[None, :], np.ones((1, 3)), shadows=False
-    )
+    expected = shade_environment(samples, camera.position, _one_light(below), shadows=False)
     choice = choose_model(models, candidates=["lambert+ggx"])
     lighting = prepare_lighting(models, _one_light(below))
     assert lighting.outside_fraction == 1.0
@@ -185,21 +180,12 @@ def test_light_from_below_the_rig_is_evaluated_physically(
     np.testing.assert_allclose(radiance[useful], expected[useful], rtol=1e-3, atol=1e-6)
 
 
-def test_grid_lights_are_the_ground_truth_prefilter() -> None:
-    rgb = _panorama(4)
-    lights = grid_lights(rgb, 8)
-    directions, light = environment_lights(rgb, 8)
-    np.testing.assert_allclose(lights.directions, directions, atol=1e-12)
-    np.testing.assert_allclose(lights.rgb, light, rtol=1e-12)
-    total = (rgb * panorama_solid_angles(16, 32)[:, :, None]).sum(axis=(0, 1))
-    np.testing.assert_allclose(lights.rgb.sum(axis=0), total, rtol=1e-6)
-
-
 def test_sampled_lights_keep_the_light_and_sit_at_their_cells_centroids() -> None:
     rgb = _panorama(5)
     total = (rgb * panorama_solid_angles(16, 32)[:, :, None]).sum(axis=(0, 1))
-    centred = sampled_lights(rgb, 16)
-    plain = sampled_lights(rgb, 16, centroids=False)
+    panorama = panorama_from_array(rgb)
+    centred = light_environment(panorama, LightingControls(k=16, centroids=True)).light_set()
+    plain = light_environment(panorama, LightingControls(k=16)).light_set()
     np.testing.assert_allclose(centred.rgb.sum(axis=0), total, rtol=1e-6)
     np.testing.assert_allclose(np.linalg.norm(centred.directions, axis=1), 1.0)
     # The centroid of a cell differs from its sample, the light is the same.

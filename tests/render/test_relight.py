@@ -9,7 +9,7 @@ from core.camera_model import PinholeCamera
 from core.directions import hemisphere_layout
 from core.errors import InputError
 from core.field_store import FieldStoreWriter, ReflectanceField
-from processing.lights import LightSet
+from core.light_set import LightSet
 from processing.panorama import panorama_from_array
 from render.light_weights import (
     pixel_light_weights,

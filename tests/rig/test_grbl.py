@@ -30,7 +30,7 @@ from rig.grbl_protocol import (
     validate_command,
 )
 from sim.grbl_emulator import FaultRule, GrblEmulator, GrblFaults, LightState
-from sim.grbl_machine import Profile
+from sim.grbl_motion import Profile
 
 FAST = {110: 36000.0, 111: 36000.0, 112: 36000.0, 120: 20000.0, 121: 20000.0, 122: 20000.0}
 AXES = GantryAxes(GantryAxisConfig("X", -180.0, 180.0), GantryAxisConfig("Y", 0.0, 90.0))

@@ -12,7 +12,8 @@ from app.cli import main
 from core.brdf import brdf
 from core.camera_model import PinholeCamera
 from core.directions import panorama_solid_angles
-from sim.ground_truth import environment_lights, render_environment, shade_environment
+from core.light_set import LightSet, grid_lights
+from sim.ground_truth import render_environment, shade_environment
 from sim.scenes import build_scene
 
 
@@ -23,7 +24,7 @@ def test_kernel_evaluates_the_material_model() -> None:
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     light = rng.random((30, 3))
     viewpoint = np.array([0.5, 3.0, 1.0])
-    got = shade_environment(s, viewpoint, d, light, shadows=False)
+    got = shade_environment(s, viewpoint, LightSet(d, light), shadows=False)
     view = viewpoint - s.points
     view /= np.linalg.norm(view, axis=1, keepdims=True)
     expected = sum(
@@ -37,9 +38,9 @@ def test_kernel_evaluates_the_material_model() -> None:
 
 
 @pytest.mark.parametrize("grid", [None, 16, 8])
-def test_environment_lights_keep_all_light(grid: int | None) -> None:
+def test_grid_lights_keep_all_light(grid: int | None) -> None:
     rgb = np.random.default_rng(1).random((32, 64, 3))
-    _, light = environment_lights(rgb, grid)
+    light = grid_lights(rgb, grid).rgb
     total = (rgb * panorama_solid_angles(32, 64)[:, :, None]).sum((0, 1))
     np.testing.assert_allclose(light.sum(0), total, rtol=1e-12)
 
@@ -48,9 +49,9 @@ def test_environment_lights_keep_all_light(grid: int | None) -> None:
 def test_white_furnace(grid: int | None, tolerance: float) -> None:
     sphere = build_scene("diffuse-sphere", 3000)
     white = replace(sphere, rho_d=np.ones_like(sphere.rho_d))
-    directions, light = environment_lights(np.ones((64, 128, 3)), grid)
+    lights = grid_lights(np.ones((64, 128, 3)), grid)
     viewpoint = np.array([0.0, 0.0, 10.0])
-    radiance = shade_environment(white, viewpoint, directions, light, shadows=False)
+    radiance = shade_environment(white, viewpoint, lights, shadows=False)
     seen = np.sum(white.normals * (viewpoint - white.points), axis=1) > 0
     np.testing.assert_allclose(radiance[seen], 1.0, atol=tolerance)
 
@@ -72,10 +73,10 @@ def test_prefilter_error_is_small_against_exact() -> None:
 
 def test_self_shadowing_darkens_the_torus() -> None:
     torus = build_scene("textured-torus", 20_000)
-    directions, light = environment_lights(np.ones((16, 32, 3)), 8)
+    lights = grid_lights(np.ones((16, 32, 3)), 8)
     viewpoint = np.array([0.0, 0.0, 5.0])
-    lit = shade_environment(torus, viewpoint, directions, light, shadows=False)
-    shadowed = shade_environment(torus, viewpoint, directions, light, shadows=True)
+    lit = shade_environment(torus, viewpoint, lights, shadows=False)
+    shadowed = shade_environment(torus, viewpoint, lights, shadows=True)
     assert np.all(shadowed <= lit + 1e-12)
     inner = np.hypot(torus.points[:, 0], torus.points[:, 1]) < 0.55  # inside of the ring
     seen = inner & (lit[:, 0] > 0)

@@ -1,0 +1,134 @@
+"""Directional lights standing for an environment: the one light-set type every engine takes.
+
+An environment panorama becomes K directional lights, each carrying the light of one cell of
+the panorama (radiance x solid angle, summed): the Voronoi cells of sampled directions
+(``processing.lights.disassemble_lights``) or the blocks of a pre-filter grid
+(:func:`grid_lights`). Lights of another origin (held-out measured lights) carry no cells.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from core.directions import panorama_directions, panorama_solid_angles
+from core.errors import InputError
+
+__all__ = ["LightSet", "grid_lights"]
+
+
+@dataclass(frozen=True)
+class LightSet:
+    """K directional lights that together carry the light of an environment.
+
+    Attributes
+    ----------
+    directions : ndarray, shape (K, 3), float64
+        Unit vectors toward each light, rig frame.
+    rgb : ndarray, shape (K, 3), float64
+        Light of each direction: the sum of radiance x solid angle over its cell (radiance x sr).
+    solid_angle_sr : ndarray, shape (K,), float64, or None
+        Solid angle of each light's cell (the cells of a whole panorama sum to 4 pi); None for
+        lights that did not come from a panorama.
+    labels : ndarray, shape (H, W), int32, or None
+        Index of the light that owns each panorama pixel; -1 for pixels of cells dropped by
+        :meth:`nonempty` (they hold no light). None for lights not from a panorama.
+    """
+
+    directions: NDArray[np.float64]
+    rgb: NDArray[np.float64]
+    solid_angle_sr: NDArray[np.float64] | None = None
+    labels: NDArray[np.int32] | None = None
+
+    def __post_init__(self) -> None:
+        if self.directions.ndim != 2 or self.directions.shape[1] != 3:
+            raise InputError(f"light directions must be (K, 3), got {self.directions.shape}")
+        if self.rgb.shape != self.directions.shape:
+            raise InputError(
+                f"light rgb {self.rgb.shape} does not match directions {self.directions.shape}"
+            )
+
+    @property
+    def k(self) -> int:
+        """Number of lights."""
+        return int(self.directions.shape[0])
+
+    def mean_radiance(self) -> NDArray[np.float64]:
+        """Mean radiance of each cell, rgb / solid angle; shape (K, 3) (zero for empty cells)."""
+        if self.solid_angle_sr is None:
+            raise InputError("these lights have no cells: they did not come from a panorama")
+        area = self.solid_angle_sr[:, None]
+        return np.divide(self.rgb, area, out=np.zeros_like(self.rgb), where=area > 0)
+
+    def to_panorama(self) -> NDArray[np.float32]:
+        """The disassembled environment: each pixel filled with its cell's mean radiance."""
+        if self.labels is None:
+            raise InputError("these lights have no cells: they did not come from a panorama")
+        # Row K is for the pixels of dropped (empty) cells, labelled -1.
+        filled = np.vstack([self.mean_radiance(), np.zeros((1, 3))]).astype(np.float32)
+        return filled[self.labels]
+
+    def nonempty(self) -> LightSet:
+        """The lights that carry any light (the others add nothing to any sum over lights)."""
+        keep = self.rgb.sum(axis=1) > 0
+        if keep.all():
+            return self
+        labels = None
+        if self.labels is not None:
+            index = np.full(self.k + 1, -1, dtype=np.int32)
+            index[np.flatnonzero(keep)] = np.arange(int(keep.sum()), dtype=np.int32)
+            labels = index[self.labels]
+        return LightSet(
+            np.ascontiguousarray(self.directions[keep]),
+            np.ascontiguousarray(self.rgb[keep]),
+            None if self.solid_angle_sr is None else self.solid_angle_sr[keep],
+            labels,
+        )
+
+
+def grid_lights(rgb: NDArray[np.floating], grid_height: int | None = None) -> LightSet:
+    """The panorama summed exactly into ``grid_height`` x 2 ``grid_height`` blocks.
+
+    Each block becomes one light at its energy-weighted centroid direction carrying the block's
+    radiance x solid angle: the ground truth's pre-filter, and the grid lighting of the models.
+    Blocks are as equal as integer rows and columns allow.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (H, 2H, 3), linear radiance
+    grid_height : int, optional
+        Rows of blocks, >= 1; None, or H and more, for every pixel as its own light.
+
+    Returns
+    -------
+    LightSet
+        Every block, empty ones included (:meth:`LightSet.nonempty` drops those).
+    """
+    image = np.asarray(rgb, dtype=np.float64)
+    if image.ndim != 3 or image.shape[2] != 3 or image.shape[1] != 2 * image.shape[0]:
+        raise InputError(f"a panorama must have shape (H, 2H, 3), got {image.shape}")
+    height, width = image.shape[:2]
+    omega = panorama_solid_angles(height, width)
+    directions = panorama_directions(height, width)
+    energy = image * omega[:, :, None]
+    if grid_height is None or grid_height >= height:
+        labels = np.arange(height * width, dtype=np.int32).reshape(height, width)
+        return LightSet(directions.reshape(-1, 3), energy.reshape(-1, 3), omega.ravel(), labels)
+    if grid_height < 1:
+        raise InputError(f"grid height must be at least 1, got {grid_height}")
+    rows = (np.arange(grid_height) * height) // grid_height
+    cols = (np.arange(2 * grid_height) * width) // (2 * grid_height)
+
+    def blocks(values: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.add.reduceat(np.add.reduceat(values, rows, axis=0), cols, axis=1)
+
+    light = blocks(energy).reshape(-1, 3)
+    weight = energy.sum(axis=2) + 1e-30 * omega  # the geometric centre where there is no light
+    moments = blocks(directions * weight[:, :, None]).reshape(-1, 3)
+    centroids = moments / np.linalg.norm(moments, axis=1, keepdims=True)
+    block_rows = np.searchsorted(rows, np.arange(height), side="right") - 1
+    block_cols = np.searchsorted(cols, np.arange(width), side="right") - 1
+    labels = (block_rows[:, None] * (2 * grid_height) + block_cols[None, :]).astype(np.int32)
+    return LightSet(centroids, light, blocks(omega[:, :, None])[:, :, 0].ravel(), labels)
