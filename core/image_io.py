@@ -100,6 +100,8 @@ def read_pixels(path: str | os.PathLike[str]) -> NDArray[Any]:
         )
     if not file.is_file():
         raise ImageFileError(f"{file}: no such file")
+    if file.stat().st_size == 0:
+        raise ImageFileError(f"{file}: the file is empty (0 bytes)")
     if suffix in EXR_SUFFIXES:
         return _read_exr(file)
     if suffix in TIFF_SUFFIXES:
@@ -200,6 +202,9 @@ def _read_tiff(file: Path) -> NDArray[Any]:
             f"{file}: cannot decode as TIFF (truncated or corrupt?): {error}"
         ) from error
     pixels = np.asarray(pixels)
+    if pixels.size == 0 or pixels.ndim not in (2, 3):
+        # tifffile only logs a broken page table and returns nothing.
+        raise ImageFileError(f"{file}: no image in the TIFF (corrupt page table?)")
     return pixels[:, :, :3] if pixels.ndim == 3 and pixels.shape[2] == 4 else pixels
 
 
@@ -269,6 +274,8 @@ def write_linear(
         return
     if suffix not in (".hdr", ".pic", ".png"):
         raise ImageFileError(f"{file}: cannot write {suffix!r}; use .exr, .hdr or .png")
+    if not np.isfinite(image).all():
+        raise ImageFileError(f"{file}: the image holds NaN or infinite values; nothing written")
     with atomic_path(file) as temporary:
         if suffix == ".png":
             scale = 255.0 if bits == 8 else 65535.0
@@ -316,6 +323,8 @@ def encode_lossless(pixels: NDArray[Any]) -> tuple[str, bytes]:
         return ".png", encoded.tobytes()
     if pixels.dtype.kind == "f":
         buffer = io.BytesIO()
-        tifffile.imwrite(buffer, np.asarray(pixels, dtype=np.float32))
+        colour = pixels.ndim == 3 and pixels.shape[2] == 3
+        photometric = "rgb" if colour else "minisblack"
+        tifffile.imwrite(buffer, np.asarray(pixels, dtype=np.float32), photometric=photometric)
         return ".tif", buffer.getvalue()
     raise ImageFileError(f"pixels of dtype {pixels.dtype} cannot be stored; use uint8/16 or float")

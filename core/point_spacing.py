@@ -23,6 +23,9 @@ DENSITY_RADIUS = 6.5
 def _probe(cloud: NDArray[np.float64], sample: int, seed: int) -> NDArray[np.float64]:
     if len(cloud) < 2:
         raise InputError(f"a point cloud needs at least 2 points to splat, got {len(cloud)}")
+    if not np.isfinite(cloud).all():
+        bad = int((~np.isfinite(cloud).all(axis=1)).sum())
+        raise InputError(f"the point cloud has {bad} points with NaN or infinite coordinates")
     rng = np.random.default_rng(seed)
     return cloud[rng.choice(len(cloud), size=min(sample, len(cloud)), replace=False)]
 

@@ -56,11 +56,6 @@ def test_float_grey_frames_are_stored_as_float32_tiff(tmp_path: Path) -> None:
     np.testing.assert_array_equal(back, pixels)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug (core.image_io.encode_lossless): float RGB is written through tifffile without "
-    "photometric='rgb', which raises a DeprecationWarning (future tifffile: 3 grey pages)",
-)
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_float_rgb_frames_are_stored_as_float32_tiff(
     tmp_path: Path, dtype: type[np.generic]

@@ -101,11 +101,6 @@ def test_coincident_points_are_refused() -> None:
         point_spacing(doubled)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: NaN or infinite coordinates reach scipy's cKDTree, which raises a bare "
-    "ValueError ('data must be finite') instead of the project's InputError",
-)
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
 def test_non_finite_points_are_refused(bad: float) -> None:
     points = _lattice(1.0, side=10)
