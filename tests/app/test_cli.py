@@ -66,24 +66,6 @@ def test_errors_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert str(bad) in err and "no light" in err
 
 
-def test_demo_writes_pictures_and_report(tmp_path: Path) -> None:
-    assert main(["demo", "--quick", "-o", str(tmp_path)]) == 0
-    report = (tmp_path / "report.md").read_text()
-    runs = sorted(p.name for p in (tmp_path / "sampling").iterdir())
-    assert "tmed-k64" in runs and "paper-tmed-k64" in runs and len(runs) == 10
-    for run in runs:
-        assert run in report
-        assert (tmp_path / "sampling" / run / "overlay.png").stat().st_size > 0
-    for scene in ("glossy-sphere", "textured-torus"):
-        for picture in ("ground-truth.png", "paper.png", "best.png", "rotating-environment.gif"):
-            assert (tmp_path / "relight" / scene / picture).stat().st_size > 0
-    assert (tmp_path / "relight" / "rti" / "studio.png").stat().st_size > 0
-    assert "## Relighting simulated fields" in report
-    assert "## Capture on the simulated rig" in report and "capture: success" in report
-    assert (tmp_path / "capture" / "contact-sheet.png").stat().st_size > 0
-    assert (tmp_path / "capture" / "dataset" / "manifest.json").exists()
-
-
 @pytest.fixture(scope="module")
 def small_field(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("field") / "f.zarr"

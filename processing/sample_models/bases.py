@@ -1,0 +1,114 @@
+"""Linear bases over the light direction (PTM, HSH) for pixel fields: their evaluation, and the
+least-squares fit of every pixel with its closed-form (hat-matrix) leave-one-light-out error."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import factorial, lpmv
+
+from core.errors import InputError
+from processing.sample_models.fits import BASIS_MODELS, BasisFit, BasisModelName
+from processing.sample_models.loo import LooError
+
+__all__ = ["basis_size", "evaluate_basis", "fit_basis"]
+
+
+def basis_size(name: BasisModelName) -> int:
+    """Number of basis functions B of a linear-basis model (6, 4 or 9); InputError otherwise."""
+    sizes = {"ptm": 6, "hsh2": 4, "hsh3": 9}
+    if name not in sizes:
+        raise InputError(f"{name!r} is not a linear-basis model; use one of {BASIS_MODELS}")
+    return sizes[name]
+
+
+def evaluate_basis(name: str, directions: NDArray[np.floating]) -> NDArray[np.float64]:
+    """Basis functions of ``name`` at light directions in the camera frame.
+
+    Parameters
+    ----------
+    name : {"ptm", "hsh2", "hsh3"}
+    directions : ndarray, shape (N, 3), unit vectors (x right, y up, z toward the camera);
+        HSH is defined on z >= 0 (z is clipped there)
+
+    Returns
+    -------
+    ndarray, shape (N, B), float64
+    """
+    d = np.asarray(directions, dtype=np.float64)
+    if d.ndim != 2 or d.shape[1] != 3:
+        raise InputError(f"basis directions must have shape (N, 3), got {d.shape}")
+    lu, lv, lw = d[:, 0], d[:, 1], d[:, 2]
+    if name == "ptm":
+        return np.stack([lu * lu, lv * lv, lu * lv, lu, lv, np.ones_like(lu)], axis=1)
+    order = {"hsh2": 2, "hsh3": 3}.get(name)
+    if order is None:
+        raise InputError(f"unknown basis model {name!r}; use one of {BASIS_MODELS}")
+    # Hemispherical harmonics: the shifted associated Legendre P_l^|m|(2 cos theta - 1), the
+    # hemisphere mapped onto the whole [-1, 1] of the spherical harmonics (orthonormal there).
+    x = 2.0 * np.clip(lw, 0.0, 1.0) - 1.0
+    phi = np.arctan2(lv, lu)
+    columns = []
+    for degree in range(order):
+        for m in range(-degree, degree + 1):
+            a = abs(m)
+            norm = math.sqrt(
+                (2 * degree + 1)
+                * float(factorial(degree - a))
+                / (2 * math.pi * float(factorial(degree + a)))
+            )
+            legendre = lpmv(a, degree, x)
+            if m > 0:
+                columns.append(math.sqrt(2.0) * norm * np.cos(m * phi) * legendre)
+            elif m < 0:
+                columns.append(math.sqrt(2.0) * norm * np.sin(a * phi) * legendre)
+            else:
+                columns.append(norm * legendre)
+    return np.stack(columns, axis=1)
+
+
+def fit_basis(
+    name: BasisModelName, values: NDArray[np.float32], camera_lights: NDArray[np.float64]
+) -> BasisFit:
+    """Least-squares basis coefficients of every pixel and their closed-form LOO error.
+
+    The design (T, B) is shared by all pixels, so one pseudo-inverse fits them all and the hat
+    matrix gives every LOO residual at once: e_i / (1 - h_ii).
+
+    Parameters
+    ----------
+    name : {"ptm", "hsh2", "hsh3"}
+    values : ndarray, shape (T, P, 3), float32, one camera's slab (linear radiance)
+    camera_lights : ndarray, shape (T, 3), float64, the measured lights in the camera frame
+
+    Returns
+    -------
+    BasisFit, coefficients (P, B, 3) float32 and the LOO error per pixel
+
+    Raises
+    ------
+    InputError
+        The model has as many terms as the field has lights, or more.
+    """
+    t_count, p_count, _ = values.shape
+    design = evaluate_basis(name, camera_lights)
+    if t_count <= design.shape[1]:
+        raise InputError(
+            f"model {name!r} has {design.shape[1]} terms; it needs more than that many lights, "
+            f"the field has {t_count}"
+        )
+    pinv = np.linalg.pinv(design)  # (B, T)
+    flat = values.reshape(t_count, -1).astype(np.float64)
+    coefficients = pinv @ flat  # (B, P 3)
+    leverage = np.einsum("tb,bt->t", design, pinv)
+    residual = flat - design @ coefficients
+    held_out = residual / np.maximum(1.0 - leverage, 1e-9)[:, None]
+    squared = (held_out**2).reshape(t_count, p_count, 3).sum(axis=(0, 2))
+    energy = (flat**2).reshape(t_count, p_count, 3).sum(axis=(0, 2))
+    return BasisFit(
+        name=name,
+        coefficients=coefficients.reshape(-1, p_count, 3).transpose(1, 0, 2).astype(np.float32),
+        loo=LooError(squared, energy),
+    )
