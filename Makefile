@@ -28,7 +28,7 @@ demo: $(STAMP)
 	$(BIN)/rig demo -o demo-out
 
 bench: $(STAMP)
-	$(BIN)/python -m bench.sampling -o bench-out
+	$(BIN)/rig bench -o bench-out
 
 clean:
 	rm -rf $(VENV) demo-out bench-out .pytest_cache .mypy_cache .ruff_cache

@@ -1,0 +1,1 @@
+"""The ``rig`` command line and the demo: thin layers over library functions."""

@@ -214,13 +214,12 @@ def _relight_field(
 
 
 def _relight_warnings(field: Any, camera: Any, relit: Any, mode: Any, models: Any) -> list[Any]:
-    """What to expect of this relighting (render.guards.relight_warnings), under the panorama
-    as relit (yaw and exposure applied).
+    """What to expect of this relighting (``render.guards.relight_warnings``).
 
-    Interpolation modes without a fit in hand read the fit saved beside the field, if any: its
-    lobe and held-out error inform the ghosting, sun and noise guards.
+    The guards see the panorama as relit (yaw and exposure applied). Interpolation modes
+    without a fit in hand read the fit saved beside the field, if any: its lobe and held-out
+    error inform the ghosting, sun and noise guards.
     """
-
     from processing.sample_model_store import default_models_path, read_sample_models
     from render.guards import relight_warnings
 

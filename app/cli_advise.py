@@ -45,8 +45,10 @@ def add_advisor_options(p: argparse.ArgumentParser) -> None:
 def run_advisor(
     field_path: Path, env: Path, tolerance: float, samples: int
 ) -> tuple[Advice, tuple[int, int]]:
-    """Open the field and the panorama, and advise (progress bars on); also returns the
-    field's camera and light counts."""
+    """Open the field and the panorama, and advise (progress bars on).
+
+    Also returns the field's camera and light counts.
+    """
     from core.field_store import ReflectanceField
     from processing.panorama import read_panorama
     from render.advisor import Advisor

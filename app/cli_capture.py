@@ -25,6 +25,7 @@ INTERRUPTED = 130
 
 
 def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``rig capture``, ``rig verify`` and ``rig export-lp`` on the ``rig`` parser."""
     p = commands.add_parser(
         "capture",
         help="run a sweep plan on a rig (real or simulated) into a dataset",

@@ -12,6 +12,7 @@ __all__ = ["add_doctor", "add_sim_start"]
 
 
 def add_sim_start(sim_commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``rig sim start`` on the ``rig sim`` sub-command parser."""
     p = sim_commands.add_parser(
         "start",
         help="run the simulated rig: servo and GRBL emulators on pseudo-terminals",
@@ -26,6 +27,7 @@ def add_sim_start(sim_commands: argparse._SubParsersAction[argparse.ArgumentPars
 
 
 def add_doctor(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``rig doctor`` on the ``rig`` sub-command parser."""
     p = commands.add_parser(
         "doctor",
         help="check every device of a rig config",

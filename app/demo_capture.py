@@ -88,8 +88,10 @@ def capture_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
 def _advise_captured(
     field_path: Path, panorama: Panorama, quick: bool, cameras: int, lights: int
 ) -> list[str]:
-    """``rig advise`` and ``rig plan --advise`` on the captured field, with the choice's true
-    error at a view between the captured cameras."""
+    """``rig advise`` and ``rig plan --advise`` on the captured field, as report lines.
+
+    With the choice's true error at a view between the captured cameras.
+    """
     from core.field_store import ReflectanceField
     from processing.sample_model_store import models_for_field
     from render.advisor import Advisor, capture_density

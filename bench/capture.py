@@ -103,6 +103,11 @@ def _chart(result: dict[str, Any], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m bench.capture [-o DIR] [--cameras S] [--lights T]``; returns the exit status.
+
+    Also ``--speed`` (axis speed factor) and ``--size`` (image side, pixels). Writes
+    ``DIR/capture.json`` and ``DIR/capture.png`` and prints the result.
+    """
     parser = argparse.ArgumentParser(description="Capture overhead benchmark")
     parser.add_argument("-o", "--output", type=Path, default=Path("bench-out"))
     parser.add_argument("--cameras", type=int, default=4)

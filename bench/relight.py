@@ -56,6 +56,7 @@ from sim.synthetic_camera import (
 
 
 def median_ms(run: Callable[[], object], repeats: int) -> float:
+    """Median wall time of ``run()`` over ``repeats`` calls after one warm-up call, in ms."""
     run()
     times = []
     for _ in range(repeats):
@@ -68,6 +69,17 @@ def median_ms(run: Callable[[], object], repeats: int) -> float:
 def field_path(
     out: Path, scene: str, cameras: int, lights: int, points: int, size: int, dtype: str
 ) -> Path:
+    """Path of the simulated field of ``scene`` under ``out/fields/``, simulated if not there.
+
+    Parameters
+    ----------
+    out : Path, the benchmark's output directory
+    scene : str, a scene name of :mod:`sim.scenes`
+    cameras, lights : int, the field's camera poses (S) and lights (T)
+    points : int, surface samples
+    size : int, each camera's image side, pixels
+    dtype : str, the store's radiance dtype (``"float32"`` or ``"float16"``)
+    """
     path = out / "fields" / f"{scene}-S{cameras}-T{lights}-{points}-{size}px-{dtype}.zarr"
     if not path.exists():
         layout = field_cameras(cameras, width=size, height=size)
@@ -324,8 +336,10 @@ def _score(
 
 
 def image_errors(image: RelitImage, truth: Truth) -> dict[str, Any]:
-    """Relative RMSE and PSNR of a relit image over the pixels both it and the truth cover,
-    and the relative RMSE of its relit samples against the true ones."""
+    """Relative RMSE and PSNR of a relit image over the pixels both it and the truth cover.
+
+    Also the relative RMSE of its relit samples against the true ones (``sample_relative_rmse``).
+    """
     mask = image.coverage & truth.image.coverage
     mse = float(np.mean((image.rgb[mask] - truth.image.rgb[mask]) ** 2))
     peak = float(truth.image.rgb[mask].max())
@@ -351,6 +365,11 @@ class Truth:
 def truth_of(
     samples: SurfaceSamples, rgb: NDArray[np.float32], camera: PinholeCamera, shadows: bool
 ) -> Truth:
+    """The simulator's ground truth of ``samples`` seen from ``camera`` under the panorama ``rgb``.
+
+    The panorama is pre-filtered to a grid of lights ``TRUTH_GRID`` rows high; ``shadows``
+    casts the scene's shadows (needed when it is not convex).
+    """
     lights = grid_lights(rgb, TRUTH_GRID)
     radiance = shade_environment(samples, camera.position, lights, shadows=shadows)
     image = image_of_points(samples, camera, radiance)
@@ -378,6 +397,7 @@ def truths_of_views(
 
 
 def environments(name: PanoramaName) -> dict[str, Panorama]:
+    """The bundled panorama ``name`` as ``"full"`` and as ``"upper"`` (lower half black)."""
     full = read_panorama(panorama_path(name))
     upper = full.rgb.copy()
     upper[full.rgb.shape[0] // 2 :] = 0.0  # an object on a black stand
@@ -521,6 +541,11 @@ def _chart(results: dict[str, Any], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m bench.relight [-o DIR] [--quick] [--only speed|accuracy]``; the exit status.
+
+    Updates ``DIR/relight.json`` (the half not run is kept from an earlier run) and, with
+    accuracy results, writes ``DIR/relight-accuracy.md`` and ``DIR/relight.png``.
+    """
     parser = argparse.ArgumentParser(description="Relighting benchmark")
     parser.add_argument("-o", "--output", type=Path, default=Path("bench-out"))
     parser.add_argument("--quick", action="store_true", help="fewer points and fields")

@@ -210,6 +210,11 @@ def _chart(results: dict[str, Any], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m bench.sampling [-o DIR] [--repeats N] [--panorama EXR]``; the exit status.
+
+    ``--accuracy-panoramas`` lists the panoramas of the accuracy table (missing files are
+    skipped with a note). Writes ``DIR/sampling.json`` and ``DIR/sampling.png``.
+    """
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("-o", "--output", type=Path, default=Path("bench-out"))
     parser.add_argument("--repeats", type=int, default=9)

@@ -36,6 +36,10 @@ def _median_ms(run: Callable[[], object], repeats: int) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m bench.simulator [-o DIR] [--repeats N]``; returns the exit status.
+
+    Prints the table and writes ``DIR/simulator.json``.
+    """
     parser = argparse.ArgumentParser(description="Simulator benchmark")
     parser.add_argument("-o", "--output", type=Path, default=Path("bench-out"))
     parser.add_argument("--repeats", type=int, default=5)

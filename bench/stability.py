@@ -358,6 +358,7 @@ def format_stability(results: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m bench.stability [-o DIR] [--quick]``; returns the exit status."""
     parser = argparse.ArgumentParser(description="Where relighting fails, measured")
     parser.add_argument("-o", "--output", type=Path, default=Path("bench-out"))
     parser.add_argument("--quick", action="store_true", help="smaller fields and images")

@@ -397,11 +397,6 @@ class Journal:
         self._run: str | None = None
         self._events = 0
 
-    @property
-    def run_uid(self) -> str | None:
-        """The uid of the run open in this journal, or None."""
-        return self._run
-
     def _check_writable(self, run_open: bool) -> None:
         if self._fd < 0:
             raise InputError(f"{self.path}: the journal is closed")

@@ -328,8 +328,10 @@ def _separation_deg(pose: RigPose) -> float:
 
 
 class _Safety:
-    """:func:`rig.safety.pose_violation` and :func:`~rig.safety.path_violation`, with a fast
-    sufficient test in front that passes most moves without sampling them.
+    """The pose and path checks of :mod:`rig.safety`, with a fast sufficient test in front.
+
+    :func:`rig.safety.pose_violation` and :func:`~rig.safety.path_violation`; the fast test in
+    front passes most moves without sampling them.
 
     The fast test holds when the rig has no forbidden boxes, both ends are within the limits
     (a box, so the straight move is too) and the camera-light angle cannot fall below

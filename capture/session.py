@@ -85,17 +85,33 @@ class CaptureRig(Protocol):
 
     config: RigConfig
 
-    def move_to(self, pose: RigPose, *, wait: bool = True) -> RigPose | None: ...
+    def move_to(self, pose: RigPose, *, wait: bool = True) -> RigPose | None:
+        """Move every axis to ``pose``; the measured pose when ``wait``, else None.
 
-    def light_on(self, intensity: float = 1.0) -> None: ...
+        Raises :class:`~core.errors.SafetyError` before moving when the pose or the path to it
+        is unsafe.
+        """
+        ...
 
-    def light_off(self) -> None: ...
+    def light_on(self, intensity: float = 1.0) -> None:
+        """Switch the light on at ``intensity`` in (0, 1]."""
+        ...
 
-    def capture(self, exposure_ms: float) -> Frame: ...
+    def light_off(self) -> None:
+        """Switch the light off."""
+        ...
 
-    def park(self) -> RigPose | None: ...
+    def capture(self, exposure_ms: float) -> Frame:
+        """Take one frame exposed for ``exposure_ms`` milliseconds."""
+        ...
 
-    def stop(self) -> None: ...
+    def park(self) -> RigPose | None:
+        """Light off, then move to the config's park pose; the pose reached."""
+        ...
+
+    def stop(self) -> None:
+        """Stop every axis now."""
+        ...
 
 
 @dataclass(frozen=True)

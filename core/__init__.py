@@ -1,0 +1,1 @@
+"""What every package shares: conventions, camera, colour, errors, IO, BRDF, splats, field store."""

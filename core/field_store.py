@@ -242,7 +242,7 @@ class ReflectanceField:
 
     @property
     def sample_kind(self) -> str:
-        """ "points" (3D surface samples) or "pixels" (one fixed view)."""
+        """Kind of sample: ``"points"`` (3D surface samples) or ``"pixels"`` (one fixed view)."""
         return "points" if self.image_shape is None else "pixels"
 
     def camera_slab(self, camera: int) -> NDArray[np.float32]:

@@ -1,1 +1,1 @@
-"""Panorama I/O, importance sampling, light disassembling and reflectance-field processing."""
+"""Decoding, calibration, field building, panoramas, sampling, lighting, interpolation, models."""

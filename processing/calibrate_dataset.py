@@ -147,8 +147,10 @@ def _by_capture(
 
 
 def _image(dataset: Dataset, records: Sequence[ImageRecord]) -> tuple[NDArray[Any], ImageRecord]:
-    """The bracket's best image: the longest exposure with under 0.5 % saturated pixels (else
-    the shortest), as linear float RGB, and its record."""
+    """The bracket's best image as linear float RGB, and its record.
+
+    The best is the longest exposure with under 0.5 % saturated pixels (else the shortest).
+    """
     ordered = sorted(records, key=lambda r: r.exposure_ms)
     for record in reversed(ordered[1:]):
         decoded = decode_image(dataset.image_path(record))

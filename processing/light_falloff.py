@@ -197,7 +197,10 @@ def light_intensity_and_falloff(
 
 
 def _falloff_exponent(value: F64, distance: F64) -> float:
-    """p of ``value ~ distance^-p`` by least squares on logarithms; NaN without spread in r."""
+    """The exponent p of ``value ~ distance^-p`` by least squares on logarithms.
+
+    NaN without spread in r (``distance``) or with fewer than 10 positive values.
+    """
     good = value > 0
     log_r = np.log(distance[good])
     if len(log_r) < 10 or np.ptp(log_r) < 1e-3:

@@ -55,10 +55,12 @@ class Panorama:
 
     @property
     def height(self) -> int:
+        """Rows, H."""
         return int(self.rgb.shape[0])
 
     @property
     def width(self) -> int:
+        """Columns, W = 2H."""
         return int(self.rgb.shape[1])
 
 

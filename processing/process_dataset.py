@@ -42,17 +42,34 @@ class FieldSources(Protocol):
     """
 
     @property
-    def points(self) -> NDArray[np.floating]: ...
+    def points(self) -> NDArray[np.floating]:
+        """The object's surface samples, shape (P, 3), rig frame."""
+        ...
+
     @property
-    def normals(self) -> NDArray[np.floating]: ...
+    def normals(self) -> NDArray[np.floating]:
+        """The surface samples' normals, shape (P, 3), rig frame."""
+        ...
+
     @property
-    def spacing(self) -> float | None: ...
+    def spacing(self) -> float | None:
+        """The points' spacing (None: estimated from the points)."""
+        ...
+
     @property
-    def radiance_scale(self) -> float | None: ...
+    def radiance_scale(self) -> float | None:
+        """Decoded value per unit radiance per millisecond (None: 1, camera units)."""
+        ...
+
     @property
-    def light_model(self) -> dict[str, Any] | None: ...
+    def light_model(self) -> dict[str, Any] | None:
+        """The store's light model (None: directional, unit intensity)."""
+        ...
+
     @property
-    def provenance(self) -> Mapping[str, Any]: ...
+    def provenance(self) -> Mapping[str, Any]:
+        """Merged into the store's provenance."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -91,8 +108,10 @@ def dataset_camera_model(
     fov_deg: float | None = None,
     size: tuple[int, int] | None = None,
 ) -> RigCamera | None:
-    """The rig's camera model: the values given, else the config snapshot's, else (for the
-    size) the first image's; None when distance or field of view is known nowhere.
+    """The rig's camera model; None when distance or field of view is known nowhere.
+
+    Each value is the one given, else the config snapshot's, else (for the size) the first
+    image's.
 
     Parameters
     ----------

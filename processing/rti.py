@@ -194,7 +194,7 @@ def read_lp(path: str | os.PathLike[str]) -> LightPositions:
 def write_lp(
     path: str | os.PathLike[str], files: Sequence[str], directions: ArrayLike
 ) -> LightPositions:
-    """Write an RTI ``.lp`` file atomically.
+    r"""Write an RTI ``.lp`` file atomically.
 
     Parameters
     ----------
@@ -214,7 +214,7 @@ def write_lp(
 
     Notes
     -----
-    Format: ``N\\n`` then ``name x y z\\n`` per image; the numbers are written with the shortest
+    Format: ``N\n`` then ``name x y z\n`` per image; the numbers are written with the shortest
     representation that reads back to the same float64 (``repr``).
 
     Raises

@@ -82,6 +82,7 @@ class SampleSet:
 
     @property
     def k(self) -> int:
+        """Number of directions, K."""
         return int(self.directions.shape[0])
 
 

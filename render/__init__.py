@@ -1,1 +1,1 @@
-"""Relighting, point splatting, output images and charts."""
+"""Relighting engines and their modes, splat plans, sequences, outputs, guards, the advisor."""

@@ -503,8 +503,11 @@ class Advisor:
         return predictions
 
     def advise(self, panorama: Panorama, tolerance: float = 0.02) -> Advice:
-        """The fastest candidate (predicted time per new lighting) predicted within
-        ``tolerance`` (relative RMSE in (0, 1)) under ``panorama``."""
+        """The advice under ``panorama``: the fastest candidate predicted within ``tolerance``.
+
+        Fastest by predicted time per new lighting (ties: the smaller error); ``tolerance`` is
+        a relative RMSE in (0, 1). When no candidate is within it, the advice's choice is None.
+        """
         if not 0.0 < tolerance < 1.0:
             raise InputError(f"tolerance must be a relative error in (0, 1), got {tolerance}")
         predictions = self.predict(panorama)

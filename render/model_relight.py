@@ -109,8 +109,8 @@ class ModelLighting:
     lights : LightSet, the D lights that carry light
     visibility_indices, visibility_weights : ndarray, shape (D, 3), int64 / float64
         Barycentric weights (``clamp`` policy) of each light over the directions of the shadow
-        marks (``SampleModels.visibility_directions``: the measured lights, plus geometric
-        ones when completed): V_p(w_d) = sum_j weights[d, j] lit[p, indices[d, j]].
+        marks (``SampleModels.mark_directions`` when the marks were completed by geometric ones,
+        else the measured lights): V_p(w_d) = sum_j weights[d, j] lit[p, indices[d, j]].
     reaches : ndarray, shape (D,), bool, lights that may reach the samples (pixel fields: in
         front of the object plane; point fields: all)
     basis : dict of model name to ndarray (B, 3), float64
@@ -402,8 +402,10 @@ class ModelRelightSettings:
     def open(
         self, field_store: ReflectanceField, models: SampleModels | None = None
     ) -> ModelRelighter:
-        """The engine of this mode; fits the field (or reads its saved fit) when ``models`` is
-        None."""
+        """The engine of this mode on ``field_store``, relighting through ``models``.
+
+        When ``models`` is None, fits the field (or reads its saved fit).
+        """
         return ModelRelighter(
             field_store, self, models if models is not None else models_for_field(field_store)
         )
@@ -516,7 +518,7 @@ class ModelRelighter:
         self._environment = lighting
 
     def with_lighting(self, settings: ModelRelightSettings) -> ModelRelighter:
-        """This relighter with other lighting settings, sharing its prepared models.
+        """A copy of this relighter with other lighting settings, sharing its prepared models.
 
         Comparing lightings (the advisor) then skips choosing the shadow marks again; the
         model, visibility and spacing settings must be the same.

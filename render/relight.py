@@ -140,8 +140,10 @@ def blend_cameras(
 
 @dataclass(frozen=True)
 class ViewField:
-    """The field as one view sees it: the camera blend applied once, compacted to the samples
-    the view needs, so every new lighting costs a single pass over (T, Pn, 3).
+    """The field as one view sees it, blended once for every new lighting.
+
+    The camera blend is applied once and the result compacted to the samples the view needs,
+    so every new lighting costs a single pass over (T, Pn, 3).
 
     Attributes
     ----------
@@ -168,8 +170,11 @@ def blend_field(field: ReflectanceField, blend: ViewBlend) -> ViewField:
 def _camera_sphere_directions(
     points: NDArray[np.float64], eye: NDArray[np.float64], radius: float
 ) -> NDArray[np.float64]:
-    """Unit directions (P, 3) of where the rays from ``points`` to ``eye`` cross the sphere of
-    ``radius`` (the measured cameras' distance), or of the eye where a ray cannot reach it."""
+    """Unit directions (P, 3) of where the rays from ``points`` to ``eye`` cross a sphere.
+
+    The sphere has ``radius`` (the measured cameras' distance); where a ray cannot reach it, the
+    direction is the eye's.
+    """
     ray = eye - points
     ray /= np.linalg.norm(ray, axis=1, keepdims=True)
     along = np.einsum("pk,pk->p", points, ray)
@@ -247,10 +252,12 @@ def relight_pixels_literal(
     policy: OutsidePolicy = "clamp",
     grid_height: int | None = None,
 ) -> NDArray[np.float32]:
-    """Paper eq. 2 as written: for each sample, the sum over every panorama pixel in the
-    hemisphere of its normal of L dw times the interpolated field. The slow reference
-    (P x pixels x m operations) that :func:`render.light_weights.pixel_light_weights`
-    rearranges; use small P or ``grid_height``.
+    """Paper eq. 2 as written: radiance (P, 3) of every sample by a sum over panorama pixels.
+
+    For each sample, the sum over every panorama pixel in the hemisphere of its normal of L dw
+    times the interpolated field. The slow reference (P x pixels x m operations) that
+    :func:`render.light_weights.pixel_light_weights` rearranges; use small P or
+    ``grid_height``.
 
     Returns
     -------

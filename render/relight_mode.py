@@ -44,7 +44,9 @@ class RelightEngine(Protocol):
     """What both relighting engines do: a lighting and a view in, a relit image out."""
 
     @property
-    def environment(self) -> EnvironmentLighting | None: ...
+    def environment(self) -> EnvironmentLighting | None:
+        """The current lighting: the panorama as relit and its lights; None without a panorama."""
+        ...
 
     def set_lighting(
         self,
@@ -53,18 +55,29 @@ class RelightEngine(Protocol):
         yaw_deg: float = 0.0,
         exposure: float = 1.0,
         modulation: NDArray[np.floating] | None = None,
-    ) -> float: ...
+    ) -> float:
+        """Light with a panorama under the user's controls; returns the seconds it took."""
+        ...
 
-    def set_environment(self, lighting: EnvironmentLighting) -> None: ...
+    def set_environment(self, lighting: EnvironmentLighting) -> None:
+        """Prepare a lighting made by :func:`processing.environment.light_environment`."""
+        ...
 
-    def set_view(self, camera: PinholeCamera) -> float: ...
+    def set_view(self, camera: PinholeCamera) -> float:
+        """Prepare the view of ``camera``; returns the seconds it took."""
+        ...
 
-    def render(self) -> RelitImage: ...
+    def render(self) -> RelitImage:
+        """Relight the current view under the current lighting."""
+        ...
 
 
 class RelightMode(Protocol):
-    """A way to relight a field: :class:`RelightSettings` (interpolating the measured values)
-    or :class:`ModelRelightSettings` (through per-sample models)."""
+    """A way to relight a field: interpolating the measured values, or through models.
+
+    :class:`RelightSettings` interpolates the measured values; :class:`ModelRelightSettings`
+    relights through per-sample models.
+    """
 
     @property
     def uses_models(self) -> bool:
@@ -114,8 +127,10 @@ MOST_ACCURATE_MODELS = ModelRelightSettings(model="auto", lighting="grid", grid_
 def open_relighter(
     field: ReflectanceField, mode: RelightMode, models: SampleModels | None = None
 ) -> RelightEngine:
-    """The engine for ``mode``; a model mode fits ``field`` (or reads its saved fit) when
-    ``models`` is None."""
+    """The engine for ``mode`` on ``field``.
+
+    A model mode fits ``field`` (or reads its saved fit) when ``models`` is None.
+    """
     return mode.open(field, models)
 
 

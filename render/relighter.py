@@ -62,8 +62,10 @@ Predictor = tuple[str, str, int]
 
 @dataclass(frozen=True)
 class RelightSettings:
-    """How to relight by interpolating the measured values (defaults: the paper's pipeline with
-    our sampling improvements); a relighting mode (:class:`render.relight_mode.RelightMode`).
+    """How to relight by interpolating the measured values; a relighting mode.
+
+    The defaults are the paper's pipeline with our sampling improvements; a relighting mode in
+    the sense of :class:`render.relight_mode.RelightMode`.
 
     Attributes
     ----------

@@ -1,1 +1,1 @@
-"""Rig hardware, configuration, geometry and the project's shared conventions."""
+"""The rig: device protocols, Dynamixel and GRBL drivers, cameras, config, pose, safety, doctor."""

@@ -171,6 +171,7 @@ class GPhoto2Camera:
         return Frame(path=path, metadata=metadata)
 
     def close(self) -> None:
+        """Stop the capture worker and release the camera; closing twice is harmless."""
         if self._worker is not None:
             self._worker.shutdown(wait=True)
             self._worker = None

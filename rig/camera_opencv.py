@@ -50,12 +50,29 @@ _POLL_S = 0.005
 class VideoCaptureLike(Protocol):
     """The part of ``cv2.VideoCapture`` the camera uses (tests substitute fakes)."""
 
-    def isOpened(self) -> bool: ...
-    def set(self, propId: int, value: float) -> bool: ...
-    def get(self, propId: int) -> float: ...
-    def grab(self) -> bool: ...
-    def retrieve(self) -> tuple[bool, Any]: ...
-    def release(self) -> None: ...
+    def isOpened(self) -> bool:
+        """Whether the device is open."""
+        ...
+
+    def set(self, propId: int, value: float) -> bool:
+        """Set the property ``propId`` to ``value``; whether the driver accepted it."""
+        ...
+
+    def get(self, propId: int) -> float:
+        """The value of the property ``propId``."""
+        ...
+
+    def grab(self) -> bool:
+        """Grab the next frame from the device; whether one came."""
+        ...
+
+    def retrieve(self) -> tuple[bool, Any]:
+        """Decode the grabbed frame: ``(ok, image)``, the image in BGR (or BGRA, or grey)."""
+        ...
+
+    def release(self) -> None:
+        """Close the device."""
+        ...
 
 
 def exposure_to_property(exposure_ms: float, unit: str) -> float:
@@ -235,6 +252,7 @@ class OpenCVCamera:
         return Frame(pixels=_to_rgb(image), metadata=metadata)
 
     def close(self) -> None:
+        """Release the device; closing twice is harmless."""
         if self._capture is not None:
             self._capture.release()
             self._capture = None

@@ -125,4 +125,5 @@ class ReplayCamera:
         return Frame(pixels=image, path=path, metadata=metadata)
 
     def close(self) -> None:
+        """Refuse further captures (a DeviceError); closing twice is harmless."""
         self._closed = True

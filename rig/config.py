@@ -200,6 +200,7 @@ class AxisConfig:
         return device_position / self.scale + self.offset_deg
 
     def within_limits(self, rig_deg: float) -> bool:
+        """Whether ``rig_deg`` lies within ``[min_deg, max_deg]``, ends included."""
         return self.min_deg <= rig_deg <= self.max_deg
 
 

@@ -53,6 +53,7 @@ class Table:
         return f"{self.path}.{name}" if self.path else name
 
     def has(self, name: str) -> bool:
+        """Whether the table gives ``name`` (without marking it read)."""
         return name in self._data
 
     def peek(self, name: str) -> Any:
@@ -60,6 +61,7 @@ class Table:
         return self._data.get(name)
 
     def keys(self) -> list[str]:
+        """Every key the table gives, in order (without marking them read)."""
         return list(self._data)
 
     def _get(self, name: str, default: Any) -> Any:
@@ -109,6 +111,7 @@ class Table:
         return float(value)
 
     def boolean(self, name: str, default: Any = _MISSING) -> Any:
+        """A boolean, ``true`` or ``false`` (or ``default`` when absent)."""
         value = self._get(name, default)
         if name not in self._data:
             return value

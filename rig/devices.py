@@ -82,6 +82,7 @@ class Frame:
 
     @property
     def exposure_ms(self) -> float:
+        """The exposure requested, milliseconds (``metadata["exposure_ms"]``)."""
         return float(self.metadata["exposure_ms"])
 
 
@@ -186,8 +187,11 @@ class PoseAxes(Protocol):
 
 
 def close_after(close: Callable[[], None], error: BaseException | None) -> None:
-    """Close a device on leaving a ``with`` block; leaving on ``error``, a failure to close
-    becomes a note on that error instead of replacing it (the cause matters more)."""
+    """Close a device on leaving a ``with`` block, keeping the error that ended the block.
+
+    Leaving on ``error``, a failure to close becomes a note on that error instead of replacing
+    it (the cause matters more).
+    """
     if error is None:
         close()
         return

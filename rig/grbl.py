@@ -665,7 +665,7 @@ class GrblGantry:
         return math.hypot(angles_a[0] - angles_b[0], angles_a[1] - angles_b[1])
 
     def _accepted(self, goal: Vector3) -> bool:
-        """After a lost reply to a move: did GRBL take it (moving, or already there)?"""
+        """Whether GRBL took a move whose reply was lost (it is moving, or already there)."""
         status = self.status()
         if status.state in ("Run", "Hold"):
             return True

@@ -92,18 +92,23 @@ class ServoArm:
 
     @property
     def roles(self) -> tuple[str, ...]:
+        """The roles of the config's Dynamixel axes."""
         return tuple(self._axes)
 
     def connect(self) -> None:
+        """Open the servo chain's port, check and configure every servo, torque on."""
         self.chain.connect()
 
     def move_to_deg(self, targets: Mapping[str, float]) -> None:
+        """Start a synchronised move of some servos to ``{role: degrees}``; returns at once."""
         self.chain.move_many_deg(targets, wait=False)
 
     def wait_until_arrived(self, timeout_s: float) -> None:
+        """Block until every servo has stopped at its target, within ``timeout_s`` seconds."""
         self.chain.wait_until_arrived(self.roles, timeout_s)
 
     def position_deg(self) -> dict[str, float]:
+        """The measured position of every servo axis, ``{role: degrees}``."""
         return self.chain.positions_deg()
 
     def seconds_to(self, start: Mapping[str, float], end: Mapping[str, float]) -> float:
@@ -118,6 +123,7 @@ class ServoArm:
         )
 
     def stop(self) -> None:
+        """Hold every servo at its present position (clamped to the soft limits)."""
         # Holding the present position is the servos' stop: the goal becomes where they are
         # (kept inside the soft limits, which a servo may overshoot by a tick).
         here = self.chain.positions_deg()
@@ -127,6 +133,7 @@ class ServoArm:
         )
 
     def close(self) -> None:
+        """Switch torque off on every servo and close the port."""
         self.chain.close()
 
 
@@ -159,22 +166,27 @@ class LightGantry:
 
     @property
     def roles(self) -> tuple[str, ...]:
+        """``("light_azimuth", "light_inclination")``."""
         return ("light_azimuth", "light_inclination")
 
     def connect(self) -> None:
+        """Connect to GRBL, then run its homing cycle when the config asks for homing."""
         self.gantry.connect()
         if self.homing:
             self.gantry.home()
 
     def move_to_deg(self, targets: Mapping[str, float]) -> None:
+        """Start a move of the light to ``{role: degrees}``; an axis not named keeps its place."""
         # A status round trip only when an axis keeps its place (Rig.move_to names both).
         here = targets if set(self.roles) <= set(targets) else {**self.position_deg(), **targets}
         self.gantry.move_to_deg(here["light_azimuth"], here["light_inclination"], wait=False)
 
     def wait_until_arrived(self, timeout_s: float) -> None:
+        """Block until GRBL is Idle, within ``timeout_s`` seconds."""
         self.gantry.wait_until_idle(timeout_s)
 
     def position_deg(self) -> dict[str, float]:
+        """The measured light azimuth and inclination, ``{role: degrees}``."""
         azimuth, inclination = self.gantry.position_deg()
         return {"light_azimuth": azimuth, "light_inclination": inclination}
 
@@ -184,19 +196,23 @@ class LightGantry:
         return 60.0 * distance / self.gantry.feed_deg_min
 
     def light_on(self, intensity: float = 1.0) -> None:
+        """Switch the light on at ``intensity`` in [0, 1], then wait ``light.settle_s``."""
         self.gantry.light_on(intensity)
         self.light = LightState(True, intensity)
         time.sleep(self.settle_s)
 
     def light_off(self) -> None:
+        """Switch the light off, then wait ``light.settle_s``."""
         self.gantry.light_off()
         self.light = LightState()
         time.sleep(self.settle_s)
 
     def stop(self) -> None:
+        """Stop motion and switch the light off, whatever state GRBL is in; never raises."""
         self.gantry.safe_stop()
 
     def close(self) -> None:
+        """Stop motion, switch the light off and close the port (closed even if stopping fails)."""
         try:
             self.gantry.safe_stop()
         finally:
@@ -222,6 +238,7 @@ class Rig:
 
     @property
     def devices(self) -> tuple[ServoArm | LightGantry, ...]:
+        """The servo arm (when the config has Dynamixel axes) and the light gantry."""
         return (self.gantry,) if self.arm is None else (self.arm, self.gantry)
 
     def connect(self) -> None:
@@ -299,6 +316,7 @@ class Rig:
         return self.pose()
 
     def wait_until_arrived(self, timeout_s: float) -> None:
+        """Block until every device's axes are at their targets, ``timeout_s`` each."""
         for device in self.devices:
             device.wait_until_arrived(timeout_s)
 
@@ -335,9 +353,11 @@ class Rig:
         return self.move_to(park)  # raises SafetyError naming the unsafe stretch
 
     def light_on(self, intensity: float = 1.0) -> None:
+        """Switch the light on at ``intensity`` in [0, 1] and wait for it to settle."""
         self.gantry.light_on(intensity)
 
     def light_off(self) -> None:
+        """Switch the light off and wait for it to settle."""
         self.gantry.light_off()
 
     def stop(self) -> None:
@@ -347,6 +367,7 @@ class Rig:
                 device.stop()
 
     def capture(self, exposure_ms: float) -> Frame:
+        """Take one frame exposed for ``exposure_ms`` ms; InputError when built without a camera."""
         if self.camera is None:
             raise InputError("this rig was built without a camera")
         return self.camera.capture(exposure_ms)

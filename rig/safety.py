@@ -125,6 +125,7 @@ class ForbiddenZone:
         return True
 
     def describe(self) -> str:
+        """The zone in words, for messages: its name and every interval it gives."""
         limits = ", ".join(f"{a} in [{lo:g}, {hi:g}]" for a, (lo, hi) in self.bounds())
         return f"forbidden zone {self.name!r} ({limits})"
 

@@ -1,1 +1,1 @@
-"""The simulated rig, synthetic scenes and the ground-truth renderer."""
+"""The simulated world: device emulators, synthetic scenes and camera, ground truth, Mitsuba."""

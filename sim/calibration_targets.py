@@ -112,8 +112,10 @@ class BoardPlacement:
         yaw_deg: float = 0.0,
         centre: ArrayLike = (0.0, 0.0, 0.0),
     ) -> BoardPlacement:
-        """The board face up at ``centre``, turned by ``yaw_deg`` about ``+z`` (CCW from above),
-        then tilted by ``tilt_deg`` so its face normal leans toward ``tilt_azimuth_deg``.
+        """The board face up at ``centre``, turned about ``+z``, then tilted.
+
+        Turned by ``yaw_deg`` about ``+z`` (CCW from above), then tilted by ``tilt_deg`` so its
+        face normal leans toward ``tilt_azimuth_deg``.
 
         With all angles 0 the printed image reads upright seen from above with its top toward
         ``+y``: board x is rig ``+x``, board y is rig ``-y``.
@@ -222,9 +224,11 @@ def _pixel_rays(
 
 
 def _subpixel_pattern(count: int) -> tuple[F64, F64]:
-    """``count`` sample offsets in the unit pixel, one per column and one per row of a
-    ``count`` x ``count`` grid (a rank-1 lattice), so an edge along the pixel grid is measured
-    to 1 / count of a pixel rather than to 1 / sqrt(count) as by a square grid."""
+    """``count`` sample offsets (x, y) in the unit pixel, a rank-1 lattice.
+
+    One per column and one per row of a ``count`` x ``count`` grid, so an edge along the pixel
+    grid is measured to 1 / count of a pixel rather than to 1 / sqrt(count) as by a square grid.
+    """
     k = np.arange(count)
     step = next((a for a in (5, 7, 3) if a < count and math.gcd(a, count) == 1), 1)
     return (k + 0.5) / count, ((k * step) % count + 0.5) / count

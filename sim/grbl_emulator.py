@@ -44,9 +44,11 @@ _TICK_S = 0.002
 
 @dataclass(frozen=True)
 class FaultRule:
-    """When a fault strikes: with ``probability``, on lines matching ``pattern`` (a regular
-    expression searched in the filtered line GRBL answers; None for any), at most ``limit``
-    times (None for no limit)."""
+    """When a fault strikes: with ``probability``, on lines matching ``pattern``, up to ``limit``.
+
+    ``pattern`` is a regular expression searched in the filtered line GRBL answers (None for
+    any); ``limit`` is the most times the fault strikes (None for no limit).
+    """
 
     probability: float = 1.0
     pattern: str | None = None
@@ -227,6 +229,7 @@ class GrblEmulator:
 
     @property
     def settings(self) -> dict[int, float]:
+        """A copy of GRBL's ``$`` settings, ``{number: value}``."""
         with self._lock:
             return dict(self._machine.settings)
 

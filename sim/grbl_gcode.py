@@ -115,8 +115,10 @@ class OffsetChange:
 
 @dataclass(frozen=True)
 class Move:
-    """Plan a straight move to ``target`` (machine position, units) at ``rate_min`` units/min
-    (``inf`` for G0)."""
+    """Plan a straight move to ``target`` at ``rate_min``.
+
+    ``target`` is a machine position, units; ``rate_min`` is in units/min (``inf`` for G0).
+    """
 
     target: Vec
     rate_min: float

@@ -15,8 +15,10 @@ LINE_BUFFER_SIZE = 80
 
 
 class LineAssembler:
-    """GRBL's character filter: whitespace and control characters dropped, ``()`` and ``;``
-    comments removed, letters upper-cased, ``/`` ignored, overflow past 79 characters flagged.
+    """GRBL's character filter: what the received bytes leave of each line.
+
+    Whitespace and control characters dropped, ``()`` and ``;`` comments removed, letters
+    upper-cased, ``/`` ignored, overflow past 79 characters flagged.
     """
 
     def __init__(self) -> None:
@@ -30,7 +32,7 @@ class LineAssembler:
         self._comment, self._overflow = "", False
 
     def feed(self, byte: int) -> tuple[str, bool] | None:
-        """Take one byte.
+        r"""Take one byte.
 
         Parameters
         ----------
@@ -38,7 +40,7 @@ class LineAssembler:
 
         Returns
         -------
-        ``(line, overflowed)`` at an end of line (``\\n`` or ``\\r``), else None.
+        ``(line, overflowed)`` at an end of line (``\n`` or ``\r``), else None.
         """
         if byte in (0x0A, 0x0D):
             line, overflow = "".join(self._chars), self._overflow

@@ -175,8 +175,9 @@ class Block:
 
 
 class Planner:
-    """GRBL's planner buffer: the blocks in order, the first one in motion, and the position
-    the gantry rests at when none moves.
+    """GRBL's planner buffer: the blocks in order, the first one in motion.
+
+    Also the position the gantry rests at when none moves.
 
     Parameters
     ----------

@@ -1,5 +1,7 @@
-"""GRBL 1.1's real-time status report: its fields, formatted as ``report.c`` does, and the
-counters that decide when ``WCO`` and ``Ov``/``A`` are included.
+"""GRBL 1.1's real-time status report: its fields and when ``WCO`` and ``Ov``/``A`` appear.
+
+Its fields are formatted as ``report.c`` does; counters decide when ``WCO`` and ``Ov``/``A`` are
+included.
 
 WCO comes in the first report after a reset or an offset change and then every 10 (idle) or 30
 (busy) reports; Ov every 10 (idle) or 20 (busy) reports and in the first after a spindle or

@@ -38,4 +38,5 @@ class Material:
             raise InputError(f"material alpha must be in (0, 1], got {self.alpha}")
 
     def to_json(self) -> dict[str, object]:
+        """The material as plain JSON: ``rho_d``, ``f0`` and ``alpha``."""
         return {"rho_d": list(self.rho_d), "f0": list(self.f0), "alpha": self.alpha}

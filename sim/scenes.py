@@ -48,6 +48,7 @@ class SurfaceSamples:
 
     @property
     def count(self) -> int:
+        """Number of points, P."""
         return int(self.points.shape[0])
 
     @cached_property
@@ -78,6 +79,7 @@ class SceneSpec:
     convex: bool = False  # no point shadows another: visibility is n . w > 0
 
     def to_json(self) -> dict[str, Any]:
+        """The scene as plain JSON: name, description, geometry and material (and its texture)."""
         material: dict[str, Any] = dict(self.material.to_json())
         if self.texture is not None:
             material["texture"] = self.texture

@@ -254,8 +254,10 @@ class SimulatedCamera:
         return render_white_target(camera, disc, WHITE_TARGET)
 
     def render(self, pose: RigPose, light: LightState) -> NDArray[np.float32]:
-        """Noiseless linear radiance (H, W, 3) at ``pose`` under ``light``: the scene, or the
-        calibration target in place (:meth:`place_target`)."""
+        """Noiseless linear radiance (H, W, 3) at ``pose`` under ``light``.
+
+        Of the scene, or of the calibration target in place (:meth:`place_target`).
+        """
         key = (self.target, pose, light.level)
         if self._last_render is not None and self._last_render[0] == key:
             return self._last_render[1]
@@ -338,4 +340,5 @@ class SimulatedCamera:
         return Frame(pixels=pixels, metadata=metadata)
 
     def close(self) -> None:
+        """Refuse further captures (a DeviceError); closing twice is harmless."""
         self._closed = True

@@ -1,5 +1,7 @@
-"""Environments the shared panoramas lack: a procedural sky with a small, very bright sun, and
-the LDR photo of any panorama (what an ordinary camera records: exposed, clipped, 8-bit sRGB).
+"""Environments the shared panoramas lack: a procedural sky with a sun, and LDR photos.
+
+A procedural sky with a small, very bright sun, and the LDR photo of any panorama (what an
+ordinary camera records: exposed, clipped, 8-bit sRGB).
 
 Both are stress cases for relighting (docs/models.md; issue 7's benchmark): a sun is nearly all
 of the light in half a degree, which few sampled lights and sparse measured lights handle

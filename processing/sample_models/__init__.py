@@ -95,7 +95,7 @@ Package layout (each module imports only those above it)
 
 from __future__ import annotations
 
-from processing.sample_models.bases import basis_size, evaluate_basis
+from processing.sample_models.bases import evaluate_basis
 from processing.sample_models.choice import (
     ModelChoice,
     ModelScore,
@@ -134,7 +134,6 @@ __all__ = [
     "ModelScore",
     "ParametricFit",
     "SampleModels",
-    "basis_size",
     "choose_model",
     "evaluate_basis",
     "fit_sample_models",

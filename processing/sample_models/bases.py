@@ -1,5 +1,8 @@
-"""Linear bases over the light direction (PTM, HSH) for pixel fields: their evaluation, and the
-least-squares fit of every pixel with its closed-form (hat-matrix) leave-one-light-out error."""
+"""Linear bases over the light direction (PTM, HSH) for pixel fields: evaluation and fit.
+
+Their evaluation, and the least-squares fit of every pixel with its closed-form (hat-matrix)
+leave-one-light-out error.
+"""
 
 from __future__ import annotations
 
@@ -13,15 +16,7 @@ from core.errors import InputError
 from processing.sample_models.fits import BASIS_MODELS, BasisFit, BasisModelName
 from processing.sample_models.loo import LooError
 
-__all__ = ["basis_size", "evaluate_basis", "fit_basis"]
-
-
-def basis_size(name: BasisModelName) -> int:
-    """Number of basis functions B of a linear-basis model (6, 4 or 9); InputError otherwise."""
-    sizes = {"ptm": 6, "hsh2": 4, "hsh3": 9}
-    if name not in sizes:
-        raise InputError(f"{name!r} is not a linear-basis model; use one of {BASIS_MODELS}")
-    return sizes[name]
+__all__ = ["evaluate_basis", "fit_basis"]
 
 
 def evaluate_basis(name: str, directions: NDArray[np.floating]) -> NDArray[np.float64]:

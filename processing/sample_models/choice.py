@@ -1,5 +1,7 @@
-"""Choosing a field's model by leave-one-light-out error (the parsimony rule, per field or per
-sample) and the table of the candidates' scores."""
+"""Choosing a field's model by leave-one-light-out error, and the table of candidates' scores.
+
+The choice follows the parsimony rule, per field or per sample.
+"""
 
 from __future__ import annotations
 

@@ -1,5 +1,7 @@
-"""The numba kernel of the parametric fits: every sample's lambert / lambert+ggx fit, shadow
-marks, normal refinement and leave-one-light-out error, parallel over samples.
+"""The numba kernel of the parametric fits, parallel over samples.
+
+Every sample's lambert / lambert+ggx fit, shadow marks, normal refinement and
+leave-one-light-out error.
 
 This module is longer than the others on purpose: numba's ``cache=True`` invalidates a cached
 kernel only when its own source file changes, not when a jitted function or a global constant

@@ -127,11 +127,6 @@ class SampleModels:
     sample_count: int
     mark_directions: NDArray[np.float64] | None = None
 
-    @property
-    def visibility_directions(self) -> NDArray[np.float64]:
-        """Directions of the ``lit`` columns, shape (M, 3): relighting interpolates over them."""
-        return self.light_directions if self.mark_directions is None else self.mark_directions
-
     def fit(self, name: str) -> Fit:
         """The fit of model ``name``; InputError lists the fitted ones."""
         try:

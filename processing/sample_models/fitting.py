@@ -1,5 +1,8 @@
-"""Fitting a field: :func:`fit_sample_models` checks the request, fits the linear bases, finds
-the starting normals and runs the parametric kernel over memory-bounded chunks of samples."""
+"""Fitting a field's per-sample models: :func:`fit_sample_models`.
+
+:func:`fit_sample_models` checks the request, fits the linear bases, finds the starting normals
+and runs the parametric kernel over memory-bounded chunks of samples.
+"""
 
 from __future__ import annotations
 
@@ -129,8 +132,11 @@ def fit_sample_models(
 
 
 def _check_models(field: ReflectanceField, models: Sequence[str] | None) -> tuple[ModelName, ...]:
-    """The models to fit, in the order named (default: by the field's kind); InputError for an
-    empty list, an unknown model, a basis model of a point field or a repeated name."""
+    """The models to fit, in the order named (default: by the field's kind).
+
+    InputError for an empty list, an unknown model, a basis model of a point field or a
+    repeated name.
+    """
     if models is None:
         return PARAMETRIC_MODELS if field.sample_kind == "points" else MODELS
     names = tuple(models)
@@ -256,8 +262,11 @@ def _fit_parametric(
 
 
 def _sample_major(field: ReflectanceField, memory_bytes: int) -> NDArray[Any] | None:
-    """The whole radiance as (P, S, T, 3) in its storage dtype, read in one pass over the
-    cameras, or None when it exceeds ``memory_bytes`` (then chunks are read one by one)."""
+    """The whole radiance as (P, S, T, 3) in its storage dtype, or None if over ``memory_bytes``.
+
+    Read in one pass over the cameras; when it exceeds ``memory_bytes``, chunks are read one by
+    one instead.
+    """
     s_count, t_count, p_count = field.shape
     if s_count * t_count * p_count * 3 * field.dtype.itemsize > memory_bytes:
         return None

@@ -1,5 +1,8 @@
-"""Leave-one-light-out error: its record, the weights that predict a light from the others, and
-the interpolation baselines scored on the same observations as the models."""
+"""Leave-one-light-out error: its record, the prediction weights, the interpolation baselines.
+
+The weights predict a light from the others; the interpolation baselines are scored on the
+same observations as the models.
+"""
 
 from __future__ import annotations
 

@@ -1,5 +1,7 @@
-"""Visibility beyond the measured lights (point fields): shadow marks from the point cloud's own
-shadow maps, completing the fitted marks with them, and scoring them against the measured ones.
+"""Visibility beyond the measured lights (point fields), from the point cloud's shadow maps.
+
+Shadow marks from the point cloud's own shadow maps, completing the fitted marks with them, and
+scoring them against the measured ones.
 """
 
 from __future__ import annotations

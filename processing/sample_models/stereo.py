@@ -1,5 +1,7 @@
-"""Photometric stereo: the starting normals of a pixel field, from luminance over each pixel's
-middle-ranked lights."""
+"""Photometric stereo: the starting normals of a pixel field.
+
+They come from luminance over each pixel's middle-ranked lights.
+"""
 
 from __future__ import annotations
 
