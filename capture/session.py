@@ -38,11 +38,9 @@ from capture.journal import (
     runs,
 )
 from capture.plan import CaptureEvent, SweepPlan
-from core.errors import DeviceError, RigError, SafetyError
+from core.errors import DeviceError, DeviceFault, RigError, SafetyError
 from rig.config import RigConfig
 from rig.devices import Frame
-from rig.dynamixel import ServoHardwareError
-from rig.grbl import GrblAlarmError
 from rig.pose import RigPose
 
 __all__ = [
@@ -321,7 +319,7 @@ class CaptureSession:
             try:
                 measured = self.rig.move_to(pose)
                 break
-            except (SafetyError, GrblAlarmError, ServoHardwareError) as error:
+            except (SafetyError, DeviceFault) as error:
                 # Unsafe, or a fault a person must look at (a GRBL alarm locks the gantry until
                 # it is homed or unlocked; an overload drops a servo's torque until a reboot).
                 raise error from first

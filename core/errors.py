@@ -28,6 +28,14 @@ class ProtocolError(DeviceError):
     """Bytes on the wire did not follow the device's protocol."""
 
 
+class DeviceFault(DeviceError):
+    """A device reported a fault of its own that a person must clear.
+
+    A GRBL alarm, a servo's hardware error: retrying the command cannot help, unlike a lost or
+    refused reply. The executor catches this marker, never a driver's own error types.
+    """
+
+
 class SafetyError(RigError):
     """A requested motion or action would violate a safety limit; nothing was sent."""
 

@@ -9,6 +9,10 @@ bounded number of times; a write whose reply was lost is confirmed by reading th
 sent again only when the read shows it did not take. Every status packet's alert bit is checked:
 a servo with a hardware error raises :class:`ServoHardwareError` naming the error in words.
 Leaving the context manager (normally or by an exception) switches torque off on every servo.
+
+Why one module of ~680 lines: it is one driver class over one serial chain; every method goes
+through the same locked, retried, confirmed transaction. The control table (addresses, sizes,
+error bits) is :mod:`rig.dynamixel_table`.
 """
 
 from __future__ import annotations
@@ -29,7 +33,14 @@ from dynamixel_sdk import (
     PortHandler,
 )
 
-from core.errors import ConfigError, DeviceError, ProtocolError, RigError, SafetyError
+from core.errors import (
+    ConfigError,
+    DeviceError,
+    DeviceFault,
+    ProtocolError,
+    RigError,
+    SafetyError,
+)
 from rig import dynamixel_table as tbl
 from rig.devices import close_after
 from rig.dynamixel_table import Item
@@ -113,7 +124,7 @@ def _profile_units(axis: ServoAxisConfig) -> tuple[int, int]:
     )
 
 
-class ServoHardwareError(DeviceError):
+class ServoHardwareError(DeviceFault):
     """A servo reports a hardware error (its alert bit); only a reboot clears it."""
 
     def __init__(self, message: str, *, servo_id: int, role: str, errors: list[str]) -> None:

@@ -16,6 +16,11 @@ Safety rules it keeps:
   or ``unlock_on_connect=True`` do;
 - leaving the context manager (normally or by an exception) stops motion with a feed hold and
   switches the light off.
+
+Why one module of ~700 lines: it is one driver class over one connection; its methods share the
+exchange state (the line in flight, its replies, the last status), so splitting them would spread
+one protocol exchange over files. The wire format (validation, replies, status reports) is
+:mod:`rig.grbl_protocol`.
 """
 
 from __future__ import annotations
@@ -29,7 +34,15 @@ from typing import Any, Literal
 
 import serial
 
-from core.errors import ConfigError, DeviceError, InputError, ProtocolError, RigError, SafetyError
+from core.errors import (
+    ConfigError,
+    DeviceError,
+    DeviceFault,
+    InputError,
+    ProtocolError,
+    RigError,
+    SafetyError,
+)
 from rig.grbl_protocol import (
     GrblStatus,
     Reply,
@@ -137,7 +150,7 @@ class GrblCommandError(DeviceError):
         )
 
 
-class GrblAlarmError(DeviceError):
+class GrblAlarmError(DeviceFault):
     """GRBL raised ``ALARM:N``: motion stopped, spindle and coolant off, G-code locked."""
 
     def __init__(self, port: str, command: str, code: int, detail: str = "") -> None:

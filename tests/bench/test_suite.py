@@ -4,13 +4,25 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import asdict, fields
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from app.cli_bench import add_bench_parser
 from bench.report import CHARTS, pareto_front, write_report
 from bench.suite import SuiteConfig, run_suite
+from bench.suite_results import (
+    ConfigRecord,
+    EnvironmentRecord,
+    FieldRecord,
+    KRow,
+    MachineRecord,
+    Row,
+    Score,
+    SuiteResults,
+)
 
 TINY = SuiteConfig(
     name="test",
@@ -30,11 +42,11 @@ TINY = SuiteConfig(
 
 
 @pytest.fixture(scope="module")
-def results(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
+def results(tmp_path_factory: pytest.TempPathFactory) -> SuiteResults:
     return run_suite(TINY, tmp_path_factory.mktemp("suite"))
 
 
-def test_results_cover_every_study(results: dict[str, object]) -> None:
+def test_results_cover_every_study(results: SuiteResults) -> None:
     rows = results["rows"]
     assert isinstance(rows, list)
     studies = {row["study"] for row in rows}
@@ -50,7 +62,7 @@ def test_results_cover_every_study(results: dict[str, object]) -> None:
     json.dumps(results)  # results.json must hold everything as plain JSON
 
 
-def test_report_from_results(results: dict[str, object], tmp_path: Path) -> None:
+def test_report_from_results(results: SuiteResults, tmp_path: Path) -> None:
     # Through JSON, as the report is regenerated from results.json.
     loaded = json.loads(json.dumps(results))
     extra = "## Extra study\n\nA section from another module."
@@ -64,6 +76,24 @@ def test_report_from_results(results: dict[str, object], tmp_path: Path) -> None
     assert "| paper |" in text
     assert "Pareto front" in text
     assert text.rstrip().endswith("A section from another module.")
+
+
+def _keys(record: Any) -> set[str]:
+    return set(record.__required_keys__ | record.__optional_keys__)
+
+
+def test_results_follow_their_typed_layout(results: SuiteResults) -> None:
+    # The records are plain dicts at run time: the suite's output must be what the types say.
+    assert set(results) == _keys(SuiteResults)
+    assert set(results["machine"]) == _keys(MachineRecord)
+    assert set(results["config"]) == _keys(ConfigRecord) == {f.name for f in fields(SuiteConfig)}
+    # The record is the configuration as its dataclass would serialise it.
+    assert json.dumps(results["config"]) == json.dumps(asdict(TINY))
+    assert all(set(env) == _keys(EnvironmentRecord) for env in results["environments"].values())
+    assert all(set(f) == _keys(FieldRecord) for f in results["fields"])
+    for row in results["rows"]:
+        assert set(row) == _keys(KRow if row["study"] == "k" else Row)
+        assert all(set(score) == _keys(Score) for score in row["scores"])
 
 
 def test_pareto_front() -> None:
