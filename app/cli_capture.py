@@ -86,7 +86,9 @@ def console_placer(name: str | None) -> None:
 
 def _run_capture(args: argparse.Namespace) -> int:
     from capture.dataset import Dataset
-    from capture.plan import SweepPlan, grid_plan, load_plan
+    from capture.grid_plan import grid_plan
+    from capture.plan import SweepPlan
+    from capture.plan_file import load_plan
     from rig.config import load_config, parse_config
 
     if args.resume is not None:

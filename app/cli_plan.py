@@ -117,7 +117,7 @@ def plan_report(plan: SweepPlan, config: RigConfig) -> tuple[list[str], bool]:
 
 
 def _run_plan(args: argparse.Namespace) -> int:
-    from capture.plan import load_plan
+    from capture.plan_file import load_plan
     from core.errors import InputError
     from rig.config import load_config
 
@@ -136,7 +136,7 @@ def _run_plan(args: argparse.Namespace) -> int:
 def _advise_density(args: argparse.Namespace) -> int:
     """``rig plan --advise``: the density a pre-capture suggests, dry-run on a rig if given."""
     from app.cli_advise import run_advisor
-    from capture.plan import grid_plan
+    from capture.grid_plan import grid_plan
     from core.errors import InputError
     from render.advisor import capture_density
     from rig.config import load_config

@@ -31,7 +31,7 @@ DEMO_SCENE = "glossy-sphere"
 def capture_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
     """Run the capture pipeline into ``out/capture``; returns the report's lines."""
     from capture.dataset import Dataset
-    from capture.plan import grid_plan
+    from capture.grid_plan import grid_plan
     from capture.session import CaptureSession
     from processing.process_dataset import process_dataset
     from sim.capture_sources import simulated_capture_sources

@@ -26,7 +26,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 from capture.dataset import Dataset
-from capture.plan import grid_plan
+from capture.grid_plan import grid_plan
 from capture.session import CaptureSession
 from processing.process_dataset import process_dataset
 from sim.capture_sources import simulated_capture_sources

@@ -7,7 +7,7 @@ Each line is one JSON object, a *document*:
   None) and ``journal_version``.
 - ``event``: one per completed image: ``uid``, ``run_start``, ``seq_num``, ``time``,
   ``time_start``/``time_end`` (the exposure, epoch seconds) and ``record`` (the image record of
-  ``capture.dataset``: indices, kind, commanded and measured pose, exposure, file, SHA-256, size).
+  ``capture.manifest``: indices, kind, commanded and measured pose, exposure, file, SHA-256, size).
 - ``stop``: ``uid``, ``run_start``, ``time``, ``exit_status`` (success, paused, aborted, failed),
   ``reason``, ``num_events`` and ``counts``.
 
@@ -364,7 +364,7 @@ def completed_images(documents: Iterable[Mapping[str, Any]]) -> set[ImageKey]:
 
 
 class SupportsToDict(Protocol):
-    """Anything with ``to_dict()``, such as ``capture.dataset.ImageRecord``."""
+    """Anything with ``to_dict()``, such as ``capture.manifest.ImageRecord``."""
 
     def to_dict(self) -> dict[str, Any]: ...
 

@@ -17,7 +17,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from capture.dataset import Dataset, ImageRecord
+from capture.dataset import Dataset
+from capture.manifest import ImageRecord
 from core.atomic import atomic_path
 from core.camera_model import PinholeCamera
 from core.directions import direction_from_angles_deg

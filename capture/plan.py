@@ -5,8 +5,9 @@ frames, calibration captures and an ordering. It never touches a device: :meth:`
 turns it, for a given rig config, into the ordered :class:`CaptureEvent` tuple an executor runs
 (forbidden pairs skipped, the order chosen by :mod:`capture.plan_order`), and
 :meth:`SweepPlan.estimate` and :meth:`SweepPlan.limit_checks` are the dry run. Plans are read
-from TOML (:func:`load_plan`, keys in ``docs/plans.md``) and stored in a dataset's manifest as
-JSON (:meth:`SweepPlan.to_dict` / :meth:`SweepPlan.from_dict`).
+from TOML by :mod:`capture.plan_file` (keys in ``docs/plans.md``), made from hemisphere layouts
+by :mod:`capture.grid_plan`, and stored in a dataset's manifest as JSON
+(:meth:`SweepPlan.to_dict` / :meth:`SweepPlan.from_dict`).
 
 Image keys: a light image is ``ImageKey("light", camera, light, exposure)``; a dark frame
 ``ImageKey("dark", camera, None, exposure)``; a calibration capture
@@ -17,11 +18,9 @@ Image keys: a light image is ``ImageKey("light", camera, light, exposure)``; a d
 from __future__ import annotations
 
 import math
-import os
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from capture.journal import IMAGE_KINDS, ImageKey
@@ -34,15 +33,13 @@ from capture.plan_order import (
     Unplaced,
     schedules,
 )
-from core.directions import angles_deg_from_direction, hemisphere_layout
-from core.errors import ConfigError, InputError
+from core.errors import InputError
 from rig.config import RigConfig
-from rig.config_schema import Table, read_toml
 from rig.pose import CAMERA_ROLES, LIGHT_ROLES, ROLES, RigPose
 
 __all__ = [
+    "CALIBRATION_NAME",
     "IMAGE_OVERHEAD_S",
-    "LAYOUTS",
     "ORDERINGS",
     "PLAN_SCHEMA_VERSION",
     "CalibrationCapture",
@@ -50,19 +47,14 @@ __all__ = [
     "LimitCheck",
     "PlanEstimate",
     "SweepPlan",
-    "grid_plan",
-    "load_plan",
-    "parse_plan",
+    "finite_number",
+    "pose_angles",
 ]
 
 #: Version of the plan's dict and TOML form.
 PLAN_SCHEMA_VERSION = 1
-#: Hemisphere layouts of :func:`core.directions.hemisphere_layout`.
-LAYOUTS = ("grid", "fibonacci")
-#: The most poses one range may give (a tiny step is a typo, not a plan).
-MAX_RANGE_VALUES = 10_000
-_TOP_KEYS = "schema_version exposures_ms dark_frames ordering cameras lights calibration".split()
-_NAME = re.compile(r"^[a-z0-9][a-z0-9-]*$")
+#: What a calibration capture's name may be: what is at the object's place, in file-name form.
+CALIBRATION_NAME = re.compile(r"^[a-z0-9][a-z0-9-]*$")
 
 Angles = tuple[float, float]
 
@@ -106,7 +98,7 @@ class CalibrationCapture:
     exposures_ms: tuple[float, ...]
 
     def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not _NAME.match(self.name):
+        if not isinstance(self.name, str) or not CALIBRATION_NAME.match(self.name):
             raise InputError(
                 f"calibration name {self.name!r} must be lowercase letters, digits and hyphens"
             )
@@ -133,7 +125,25 @@ def _index(value: object, name: str) -> int:
     return value
 
 
-def _number(value: object, name: str) -> float:
+def finite_number(value: object, name: str) -> float:
+    """``value`` as a float, refusing anything but a finite int or float (bool included).
+
+    Parameters
+    ----------
+    value : object
+        The candidate.
+    name : str
+        Its key, for the error message.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InputError
+        ``value`` is not a finite number.
+    """
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise InputError(f"{name} = {value!r} must be a finite number")
     return float(value)
@@ -142,22 +152,40 @@ def _number(value: object, name: str) -> float:
 def _exposures(values: object, where: str) -> tuple[float, ...]:
     if not isinstance(values, list | tuple) or not values:
         raise InputError(f"{where}: exposures_ms = {values!r} must list at least one exposure")
-    exposures = tuple(_number(v, f"{where}: exposures_ms[{i}]") for i, v in enumerate(values))
+    exposures = tuple(finite_number(v, f"{where}: exposures_ms[{i}]") for i, v in enumerate(values))
     for i, value in enumerate(exposures):
         if value <= 0:
             raise InputError(f"{where}: exposures_ms[{i}] = {value:g} must be positive")
     return exposures
 
 
-def _angles(values: object, where: str) -> tuple[Angles, ...]:
+def pose_angles(values: object, where: str) -> tuple[Angles, ...]:
+    """Poses as ``(azimuth_deg, inclination_deg)`` pairs, inclination within 0..90.
+
+    Parameters
+    ----------
+    values : object
+        A non-empty list or tuple of two-number lists or tuples.
+    where : str
+        Their key, for error messages.
+
+    Returns
+    -------
+    tuple of (float, float)
+
+    Raises
+    ------
+    InputError
+        Naming the pose and the value that is not a finite number, or out of range.
+    """
     if not isinstance(values, list | tuple) or not values:
         raise InputError(f"{where} must list at least one (azimuth_deg, inclination_deg) pose")
     poses: list[Angles] = []
     for i, pose in enumerate(values):
         if not isinstance(pose, list | tuple) or len(pose) != 2:
             raise InputError(f"{where}[{i}] = {pose!r} is not (azimuth_deg, inclination_deg)")
-        azimuth = _number(pose[0], f"{where}[{i}] azimuth_deg")
-        inclination = _number(pose[1], f"{where}[{i}] inclination_deg")
+        azimuth = finite_number(pose[0], f"{where}[{i}] azimuth_deg")
+        inclination = finite_number(pose[1], f"{where}[{i}] inclination_deg")
         if not 0.0 <= inclination <= 90.0:
             raise InputError(
                 f"{where}[{i}] inclination_deg = {inclination:g} is outside 0..90 (from straight "
@@ -192,8 +220,8 @@ class SweepPlan:
     )
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "cameras", _angles(self.cameras, "cameras"))
-        object.__setattr__(self, "lights", _angles(self.lights, "lights"))
+        object.__setattr__(self, "cameras", pose_angles(self.cameras, "cameras"))
+        object.__setattr__(self, "lights", pose_angles(self.lights, "lights"))
         object.__setattr__(self, "exposures_ms", _exposures(self.exposures_ms, "plan"))
         if not isinstance(self.dark_frames, bool):
             raise InputError(f"dark_frames = {self.dark_frames!r} must be true or false")
@@ -366,257 +394,3 @@ class SweepPlan:
             ordering=data["ordering"],
             calibration=tuple(calibration),
         )
-
-
-def layout_angles(count: int, layout: str) -> tuple[Angles, ...]:
-    """``count`` (azimuth_deg, inclination_deg) over the upper hemisphere in ``layout``.
-
-    The directions of :func:`core.directions.hemisphere_layout`, which the simulator's fields
-    use too (``sim.field.field_cameras`` and the lights of ``sim.field.simulate_field``).
-    """
-    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
-        raise InputError(f"a layout needs a positive count, got {count!r}")
-    azimuth, inclination = angles_deg_from_direction(hemisphere_layout(count, layout))
-    return tuple((float(a), float(i)) for a, i in zip(azimuth, inclination, strict=True))
-
-
-def grid_plan(
-    cameras: int,
-    lights: int,
-    *,
-    exposures_ms: Sequence[float] = (40.0,),
-    layout: str = "grid",
-    dark_frames: bool = True,
-    ordering: str = "optimised",
-) -> SweepPlan:
-    """A plan of ``cameras`` x ``lights`` hemisphere poses, the layout of ``rig sim field``.
-
-    Parameters
-    ----------
-    cameras, lights : int, pose counts
-    exposures_ms : sequence of float, the bracket
-    layout : {"grid", "fibonacci", "hemisphere"}, ``hemisphere`` meaning ``fibonacci`` (the
-        near-uniform one)
-    dark_frames, ordering : as :class:`SweepPlan`
-    """
-    layout = "fibonacci" if layout == "hemisphere" else layout
-    if layout not in LAYOUTS:
-        raise InputError(f"unknown layout {layout!r}; use 'grid', 'fibonacci' or 'hemisphere'")
-    return SweepPlan(
-        cameras=layout_angles(cameras, layout),
-        lights=layout_angles(lights, layout),
-        exposures_ms=tuple(exposures_ms),
-        dark_frames=dark_frames,
-        ordering=ordering,
-    )
-
-
-# -- the TOML form -----------------------------------------------------------------------------
-
-
-class _Table(Table):
-    """A :class:`rig.config_schema.Table` that also reads raw values and sub-tables."""
-
-    def value(self, name: str, default: Any = None) -> Any:
-        """The raw value of ``name`` (``default`` when absent), marked read."""
-        return self._get(name, default)
-
-    def sub(self, name: str, *, required: bool = True) -> _Table | None:
-        value = self.value(name)
-        if value is None:
-            if required:
-                raise ConfigError(f"section [{self.key(name)}] is missing")
-            return None
-        if not isinstance(value, Mapping):
-            raise ConfigError(f"{self.key(name)} = {value!r} is not a table")
-        return _Table(value, self.key(name))
-
-    def only(self, *names: str) -> None:
-        """Refuse keys other than ``names`` before reading any (typos are named first)."""
-        for key in self.keys():
-            if key not in names:
-                known = ", ".join(sorted(names))
-                raise ConfigError(f"unknown key {self.key(key)}; keys here are: {known}")
-
-    def subs(self, name: str) -> list[_Table]:
-        """An optional array of tables (``[[name]]``)."""
-        value = self.value(name, [])
-        if not isinstance(value, list) or not all(isinstance(v, Mapping) for v in value):
-            raise ConfigError(f"{self.key(name)} must be an array of tables [[{name}]]")
-        return [_Table(v, f"{self.key(name)}[{i}]") for i, v in enumerate(value)]
-
-    def numbers(self, name: str) -> list[float]:
-        """A required non-empty array of finite numbers."""
-        value = self.value(name)
-        key = self.key(name)
-        if value is None:
-            raise ConfigError(f"{key} is missing")
-        if value == []:
-            raise ConfigError(f"{key} = [] is empty; list at least one value")
-        if not isinstance(value, list):
-            raise ConfigError(f"{key} = {value!r} must be an array of numbers")
-        return [_number(v, f"{key}[{i}]") for i, v in enumerate(value)]
-
-    def exposures(self, name: str = "exposures_ms") -> tuple[float, ...]:
-        """A required non-empty array of positive exposures."""
-        values = self.numbers(name)
-        for i, value in enumerate(values):
-            if value <= 0:
-                raise ConfigError(f"{self.key(name)}[{i}] = {value:g} must be positive")
-        return tuple(values)
-
-
-def _range_values(table: _Table, azimuth: bool) -> list[float]:
-    start, stop, step = (table.number(k) for k in ("start", "stop", "step"))
-    table.finish()
-    if step <= 0:
-        raise ConfigError(f"{table.key('step')} = {step:g} must be positive")
-    if stop < start:
-        raise ConfigError(f"{table.key('stop')} = {stop:g} is below start = {start:g}")
-    count = math.floor((stop - start) / step + 1e-9) + 1
-    if azimuth and start + (count - 1) * step >= start + 360.0 - 1e-9:
-        count = math.ceil((360.0 - 1e-9) / step)  # a full turn: the start is not repeated
-    if count > MAX_RANGE_VALUES:
-        raise ConfigError(f"{table.path} gives {count} values; at most {MAX_RANGE_VALUES}")
-    return [start + k * step for k in range(count)]
-
-
-def _axis_values(table: _Table, name: str) -> list[float]:
-    """An angle axis: a number, an array of numbers or a {start, stop, step} range."""
-    key = table.key(name)
-    raw = table.peek(name)
-    labelled: list[tuple[str, float]]
-    if isinstance(raw, Mapping):
-        sub = table.sub(name)
-        assert sub is not None
-        values = _range_values(sub, azimuth=name == "azimuth_deg")
-        labelled = [(f"{key} = {{start, stop, step}} gives {v:g}, which", v) for v in values]
-    elif isinstance(raw, list):
-        labelled = [(f"{key}[{i}] = {v:g}", v) for i, v in enumerate(table.numbers(name))]
-    else:
-        labelled = [(f"{key} = {table.number(name):g}", float(raw))]
-    if name == "inclination_deg":
-        for label, value in labelled:
-            if not 0.0 <= value <= 90.0:
-                raise ConfigError(
-                    f"{label} is outside 0..90 (inclination runs from straight above to the "
-                    "horizon)"
-                )
-    return [value for _, value in labelled]
-
-
-def _poses(table: _Table) -> tuple[Angles, ...]:
-    """The poses of ``[cameras]`` or ``[lights]``: a grid of angles, a list, or a layout."""
-    table.only("azimuth_deg", "inclination_deg", "poses_deg", "layout", "count")
-    forms = [f for f in ("azimuth_deg", "poses_deg", "layout") if table.has(f)]
-    if len(forms) != 1:
-        raise ConfigError(
-            f"[{table.path}] needs exactly one of azimuth_deg + inclination_deg, poses_deg, "
-            f"or layout + count; got {', '.join(forms) or 'none'}"
-        )
-    if forms[0] == "azimuth_deg":
-        azimuths = _axis_values(table, "azimuth_deg")
-        inclinations = _axis_values(table, "inclination_deg")
-        poses: tuple[Angles, ...] = tuple((a, i) for i in inclinations for a in azimuths)
-    elif forms[0] == "poses_deg":
-        raw = table.value("poses_deg")
-        try:
-            poses = _angles(raw, table.key("poses_deg"))
-        except InputError as error:
-            raise ConfigError(str(error)) from None
-    else:
-        layout = table.string("layout", choices=LAYOUTS)
-        count = table.integer("count")
-        if count < 1:
-            raise ConfigError(f"{table.key('count')} = {count} must be at least 1")
-        poses = layout_angles(count, layout)
-    table.finish()
-    return poses
-
-
-def _index_list(table: _Table, name: str, count: int, words: Sequence[str]) -> list[int] | str:
-    """``name`` as one of ``words`` or an array of indices below ``count``."""
-    value = table.value(name)
-    key = table.key(name)
-    if value is None:
-        raise ConfigError(f"{key} is missing; give {' or '.join(map(repr, words))} or indices")
-    if isinstance(value, str):
-        if value not in words:
-            raise ConfigError(f"{key} = {value!r} is not {' or '.join(map(repr, words))}")
-        return value
-    if not isinstance(value, list) or not value:
-        raise ConfigError(f"{key} = {value!r} must be {' or '.join(map(repr, words))} or indices")
-    for i, index in enumerate(value):
-        if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < count:
-            raise ConfigError(f"{key}[{i}] = {index!r} is not an index in 0..{count - 1}")
-    return list(value)
-
-
-def _calibration(
-    tables: Iterable[_Table], cameras: int, lights: int, exposures: tuple[float, ...]
-) -> tuple[CalibrationCapture, ...]:
-    captures: list[CalibrationCapture] = []
-    names: set[str] = set()
-    for table in tables:
-        table.only("name", "cameras", "lights", "exposures_ms")
-        name = table.string("name")
-        if not _NAME.match(name):
-            raise ConfigError(
-                f"{table.key('name')} = {name!r} must be lowercase letters, digits and hyphens"
-            )
-        if name in names:
-            raise ConfigError(f"{table.key('name')} = {name!r} is used twice")
-        names.add(name)
-        camera_list = _index_list(table, "cameras", cameras, ("all",))
-        light_list = _index_list(table, "lights", lights, ("off", "all"))
-        bracket = table.exposures() if table.has("exposures_ms") else exposures
-        table.finish()
-        chosen_cameras = range(cameras) if isinstance(camera_list, str) else camera_list
-        chosen_lights: Sequence[int | None] = list(range(lights))
-        if not isinstance(light_list, str):
-            chosen_lights = list(light_list)
-        elif light_list == "off":
-            chosen_lights = [None]
-        captures += [
-            CalibrationCapture(name, c, t, bracket) for c in chosen_cameras for t in chosen_lights
-        ]
-    return tuple(captures)
-
-
-def parse_plan(data: Mapping[str, Any], source: str | os.PathLike[str] | None = None) -> SweepPlan:
-    """Validate parsed TOML tables and build the plan (keys in ``docs/plans.md``).
-
-    Raises
-    ------
-    InputError
-        Naming the file, the key path and the value.
-    """
-    where = str(source) if source is not None else "<plan>"
-    try:
-        root = _Table(data)
-        root.only(*_TOP_KEYS)
-        version = root.integer("schema_version", PLAN_SCHEMA_VERSION)
-        if version != PLAN_SCHEMA_VERSION:
-            raise ConfigError(f"schema_version = {version}; only {PLAN_SCHEMA_VERSION} is read")
-        exposures = root.exposures()
-        cameras_table, lights_table = root.sub("cameras"), root.sub("lights")
-        assert cameras_table is not None and lights_table is not None
-        cameras, lights = _poses(cameras_table), _poses(lights_table)
-        tables = root.subs("calibration")
-        plan = SweepPlan(
-            cameras=cameras,
-            lights=lights,
-            exposures_ms=exposures,
-            dark_frames=root.boolean("dark_frames", True),
-            ordering=root.string("ordering", "optimised", choices=ORDERINGS),
-            calibration=_calibration(tables, len(cameras), len(lights), exposures),
-        )
-        root.finish()
-        return plan
-    except InputError as error:
-        raise InputError(f"{where}: {error}") from None
-
-
-def load_plan(path: str | os.PathLike[str]) -> SweepPlan:
-    """Read and validate a sweep plan file (TOML); see ``docs/plans.md``."""
-    return parse_plan(read_toml(path, "plan"), Path(path))

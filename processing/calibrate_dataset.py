@@ -34,7 +34,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from capture.dataset import Dataset, ImageRecord
+from capture.dataset import Dataset
+from capture.manifest import ImageRecord
 from capture.plan import SweepPlan
 from core.calibrated_camera import CalibratedCamera, CameraPose, Intrinsics, PoseDisagreement
 from core.camera_model import RigCamera

@@ -35,7 +35,8 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from capture.dataset import Dataset, ImageRecord
+from capture.dataset import Dataset
+from capture.manifest import ImageRecord
 from core.camera_model import RigCamera
 from core.errors import DatasetError, InputError
 from core.field_store import FieldStoreWriter

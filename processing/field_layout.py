@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from capture.dataset import Dataset, ImageRecord
+from capture.dataset import Dataset
+from capture.manifest import ImageRecord
 from core.camera_model import PinholeCamera, RigCamera
 from core.directions import angles_deg_from_direction, direction_from_angles_deg, normalize
 from core.errors import DatasetError, InputError

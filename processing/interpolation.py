@@ -14,8 +14,9 @@ environment light, a panorama pixel, the wanted view), sparse weights over the m
     The single nearest measured direction.
 ``barycentric``
     Planar barycentric coordinates of the point where the query ray crosses the flat (chord)
-    triangle that contains it, in a spherical Delaunay triangulation of the measured set.
-    Exact at measured directions, linear along edges, continuous.
+    triangle that contains it, in a spherical Delaunay triangulation of the measured set
+    (:class:`processing.measured_region.MeasuredRegion`). Exact at measured directions, linear
+    along edges, continuous.
 ``rbf``
     A Gaussian in angle over the 8 nearest, lowered by its value at the 9th nearest so that the
     weights stay continuous as the query moves, normalised.
@@ -26,13 +27,8 @@ horizon is always outside). Every result flags the queries outside it (``outside
 can measure how much light or view it concerns, and a policy handles them: ``clamp`` (default)
 moves the query to the nearest point of the region (barycentric: weights on the two ends of the
 nearest boundary edge, or on one corner; the other methods already pick the nearest measured
-directions), ``zero`` gives them all-zero weights (their light is dropped).
-
-The triangulation is the convex hull of the measured directions together with the origin: its
-faces that do not touch the origin tile the region (they are the spherical Delaunay triangles),
-the faces through the origin are the region's bounding planes. Measured sets on one great circle
-(or of one or two directions) have no triangles: their region is that arc (or those points),
-and queries off it are outside.
+directions), ``zero`` gives them all-zero weights (their light is dropped). The region, its
+triangulation and the clamp are :mod:`processing.measured_region`.
 """
 
 from __future__ import annotations
@@ -41,10 +37,9 @@ import math
 from dataclasses import dataclass
 from typing import Any, Literal, get_args
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import ConvexHull, QhullError, cKDTree
+from scipy.spatial import cKDTree
 
 from core.directions import (
     angle_between,
@@ -53,6 +48,7 @@ from core.directions import (
     direction_from_angles_deg,
 )
 from core.errors import InputError
+from processing.measured_region import DUPLICATE_CHORD, MeasuredRegion
 
 __all__ = [
     "METHODS",
@@ -76,15 +72,6 @@ OutsidePolicy = Literal["clamp", "zero"]
 POLICIES: tuple[OutsidePolicy, ...] = get_args(OutsidePolicy)
 #: Measured directions an ``rbf`` weight row spans (one more sets the kernel's zero level).
 RBF_NEIGHBOURS = 8
-
-#: Measured directions closer than this (radians, as a chord) are refused as duplicates.
-_DUPLICATE = 1e-9
-#: A hull face whose plane passes within this of the origin bounds the region (no triangle).
-_PLANE = 1e-12
-#: A query is inside a triangle when no barycentric coordinate is below -this x their sum.
-_LAMBDA = 1e-10
-#: Queries per block of the point-location kernel (each block walks from its last triangle).
-_BLOCK = 256
 
 
 @dataclass(frozen=True)
@@ -195,9 +182,9 @@ def interpolation_weights(
         raise InputError(f"width_deg applies to method 'rbf' only, got it for {method!r}")
     points, tree = _measured(measured)
     q = _unit_rows(queries, "queries", "query", "Q", allow_empty=True)
-    region = _Region.build(points)
+    region = MeasuredRegion.build(points)
     if method == "barycentric":
-        return region.barycentric(q, clamp=policy == "clamp")
+        return DirectionWeights(*region.barycentric(q, clamp=policy == "clamp"))
     if method == "paper":
         indices, weights = _paper(tree, q, int(m), len(points))
     elif method == "nearest":
@@ -262,7 +249,7 @@ def _measured(measured: ArrayLike) -> tuple[FloatArray, Any]:
     tree = cKDTree(points)
     if len(points) > 1:
         chord, other = tree.query(points, k=2)
-        close = np.flatnonzero(chord[:, 1] < _DUPLICATE)
+        close = np.flatnonzero(chord[:, 1] < DUPLICATE_CHORD)
         if close.size:
             i = int(close[0])
             j = int(other[i, 1]) if int(other[i, 1]) != i else int(other[i, 0])
@@ -332,306 +319,3 @@ def _rbf(tree: Any, queries: FloatArray, count: int, width: float) -> tuple[IntA
     weights[tied] = g[tied, :k]
     total[tied] = weights[tied].sum(axis=1)
     return index[:, :k], weights / total[:, None]
-
-
-# --- the measured region and its triangulation ------------------------------------------------
-
-
-@dataclass(frozen=True)
-class _Region:
-    """The spherical convex hull of the measured set, triangulated.
-
-    vertices (N, 3); triangles (F, 3) vertex indices; inverse (F, 3, 3), the inverse of the
-    matrix whose columns are a triangle's vertices (its barycentric coordinates of q are
-    inverse @ q, up to scale); neighbours (F, 3), the triangle across the edge opposite each
-    vertex or -1 on the boundary; planes (C, 3), outward normals of the bounding planes through
-    the origin (q is outside when any n . q > 0); edges (E, 2), the boundary arcs; corners, the
-    vertices a clamped query may land on.
-    """
-
-    vertices: FloatArray
-    triangles: IntArray
-    inverse: FloatArray
-    neighbours: IntArray
-    planes: FloatArray
-    edges: IntArray
-    corners: IntArray
-
-    @property
-    def solid(self) -> bool:
-        return self.triangles.shape[0] > 0
-
-    @staticmethod
-    def build(points: FloatArray) -> _Region:
-        count = len(points)
-        if count >= 3:
-            s = np.linalg.svd(points, compute_uv=False)
-            if s[2] > 1e-9 * s[0]:
-                try:
-                    hull = ConvexHull(np.vstack([points, np.zeros((1, 3))]))
-                except QhullError:
-                    hull = None
-                if hull is not None:
-                    region = _Region._from_hull(points, hull)
-                    if region.solid:
-                        return region
-        return _Region._arcs(points)
-
-    @staticmethod
-    def _from_hull(points: FloatArray, hull: Any) -> _Region:
-        count = len(points)
-        simplices = hull.simplices.astype(np.int64)
-        offset = -hull.equations[:, 3]  # distance of each face plane from the origin
-        keep = (offset > _PLANE) & ~np.any(simplices == count, axis=1)
-        triangles = simplices[keep]
-        renumber = np.full(len(simplices), -1, dtype=np.int64)
-        renumber[keep] = np.arange(len(triangles))
-        neighbours = renumber[hull.neighbors[keep]]
-        inverse = np.linalg.inv(points[triangles].transpose(0, 2, 1))
-        t, i = np.nonzero(neighbours < 0)
-        edges = np.stack([triangles[t, (i + 1) % 3], triangles[t, (i + 2) % 3]], axis=1)
-        return _Region(
-            vertices=points,
-            triangles=triangles,
-            inverse=np.ascontiguousarray(inverse),
-            neighbours=np.ascontiguousarray(neighbours),
-            planes=np.ascontiguousarray(hull.equations[~keep, :3]),
-            edges=edges.astype(np.int64).reshape(-1, 2),
-            corners=np.unique(edges).astype(np.int64),
-        )
-
-    @staticmethod
-    def _arcs(points: FloatArray) -> _Region:
-        # One, two or more directions on a single great circle: the region is the shortest arc
-        # system through them (consecutive directions along the circle, the largest gap left out
-        # when it exceeds a half turn) or, for one direction or an antipodal pair, the points.
-        edges = np.zeros((0, 2), dtype=np.int64)
-        if len(points) >= 2:
-            _, s, vt = np.linalg.svd(points)
-            if s[1] > 1e-9 * s[0]:
-                normal = vt[2]
-                u = points[0]
-                v = np.cross(normal, u)
-                angle = np.arctan2(points @ v, points @ u)
-                order = np.argsort(angle)
-                gaps = np.diff(np.append(angle[order], angle[order[0]] + 2.0 * np.pi))
-                pairs = np.stack([order, np.roll(order, -1)], axis=1)
-                use = gaps < np.pi - 1e-9
-                if gaps.max() >= np.pi - 1e-9:
-                    use[np.argmax(gaps)] = False
-                edges = pairs[use].astype(np.int64).reshape(-1, 2)
-        corners = np.arange(len(points), dtype=np.int64)
-        return _Region(
-            vertices=points,
-            triangles=np.zeros((0, 3), dtype=np.int64),
-            inverse=np.zeros((0, 3, 3)),
-            neighbours=np.zeros((0, 3), dtype=np.int64),
-            planes=np.zeros((0, 3)),
-            edges=edges,
-            corners=corners,
-        )
-
-    def outside(self, queries: FloatArray) -> NDArray[np.bool_]:
-        """Queries (Q, 3) outside the region; shape (Q,), bool."""
-        if self.solid:
-            out = np.zeros(len(queries), dtype=bool)
-            _outside_kernel(queries, self.planes, out)
-            return out
-        _, _, gap = self._clamp(queries, np.arange(len(queries), dtype=np.int64))
-        return gap > _DUPLICATE
-
-    def _clamp(
-        self, queries: FloatArray, rows: IntArray
-    ) -> tuple[IntArray, FloatArray, FloatArray]:
-        index = np.zeros((len(queries), 3), dtype=np.int64)
-        weights = np.zeros((len(queries), 3))
-        gap = np.zeros(len(queries))
-        cross = np.cross(self.vertices[self.edges[:, 0]], self.vertices[self.edges[:, 1]])
-        normal = cross / np.linalg.norm(cross, axis=1, keepdims=True)
-        _clamp_kernel(
-            queries,
-            rows,
-            self.vertices,
-            self.edges,
-            np.ascontiguousarray(normal),
-            self.corners,
-            index,
-            weights,
-            gap,
-        )
-        return index, weights, gap
-
-    def barycentric(self, queries: FloatArray, *, clamp: bool) -> DirectionWeights:
-        q_count = len(queries)
-        if self.solid:
-            index = np.zeros((q_count, 3), dtype=np.int64)
-            weights = np.zeros((q_count, 3))
-            outside = np.zeros(q_count, dtype=bool)
-            _locate_kernel(
-                queries,
-                self.planes,
-                self.triangles,
-                self.inverse,
-                self.neighbours,
-                outside,
-                index,
-                weights,
-            )
-            rows = np.flatnonzero(outside).astype(np.int64)
-            if clamp and rows.size:
-                near, w, _ = self._clamp(queries, rows)
-                index[rows], weights[rows] = near[rows], w[rows]
-            elif rows.size:
-                index[rows] = self.edges[0, 0] if len(self.edges) else 0
-        else:
-            index, weights, gap = self._clamp(queries, np.arange(q_count, dtype=np.int64))
-            outside = gap > _DUPLICATE
-        if not clamp:
-            weights[outside] = 0.0
-        return DirectionWeights(index, weights, outside)
-
-
-@numba.njit(cache=True, parallel=True)
-def _outside_kernel(queries: FloatArray, planes: FloatArray, outside: NDArray[np.bool_]) -> None:
-    for row in numba.prange(queries.shape[0]):
-        x, y, z = queries[row, 0], queries[row, 1], queries[row, 2]
-        for c in range(planes.shape[0]):
-            if planes[c, 0] * x + planes[c, 1] * y + planes[c, 2] * z > _PLANE:
-                outside[row] = True
-                break
-
-
-@numba.njit(cache=True, parallel=True)
-def _locate_kernel(
-    queries: FloatArray,
-    planes: FloatArray,
-    triangles: IntArray,
-    inverse: FloatArray,
-    neighbours: IntArray,
-    outside: NDArray[np.bool_],
-    index: IntArray,
-    weights: FloatArray,
-) -> None:
-    # Point location by a visibility walk: from the last triangle of the block (the first query
-    # of a block searches them all), cross the edge of the most negative coordinate until none
-    # is negative; a walk that leaves the triangulation or runs too long falls back to a search
-    # of every triangle for the one the query is least outside of.
-    q_count = queries.shape[0]
-    f_count = triangles.shape[0]
-    for block in numba.prange((q_count + _BLOCK - 1) // _BLOCK):
-        current = -1
-        for row in range(block * _BLOCK, min((block + 1) * _BLOCK, q_count)):
-            x, y, z = queries[row, 0], queries[row, 1], queries[row, 2]
-            out = False
-            for c in range(planes.shape[0]):
-                if planes[c, 0] * x + planes[c, 1] * y + planes[c, 2] * z > _PLANE:
-                    out = True
-                    break
-            if out:
-                outside[row] = True
-                continue
-            t = current
-            found = False
-            if t >= 0:
-                for _ in range(f_count + 3):
-                    worst = 0
-                    low = np.inf
-                    size = 0.0
-                    for i in range(3):
-                        lam = inverse[t, i, 0] * x + inverse[t, i, 1] * y + inverse[t, i, 2] * z
-                        size += abs(lam)
-                        if lam < low:
-                            low = lam
-                            worst = i
-                    if low >= -_LAMBDA * size:
-                        found = True
-                        break
-                    t = neighbours[t, worst]
-                    if t < 0:
-                        break
-            if not found:
-                best = -np.inf
-                t = 0
-                for f in range(f_count):
-                    low = np.inf
-                    size = 0.0
-                    for i in range(3):
-                        lam = inverse[f, i, 0] * x + inverse[f, i, 1] * y + inverse[f, i, 2] * z
-                        size += abs(lam)
-                        low = min(low, lam)
-                    score = low / size if size > 0.0 else -np.inf
-                    if score > best:
-                        best = score
-                        t = f
-            total = 0.0
-            for i in range(3):
-                lam = inverse[t, i, 0] * x + inverse[t, i, 1] * y + inverse[t, i, 2] * z
-                lam = max(lam, 0.0)
-                weights[row, i] = lam
-                total += lam
-            for i in range(3):
-                index[row, i] = triangles[t, i]
-                weights[row, i] = weights[row, i] / total if total > 0.0 else 1.0 / 3.0
-            current = t
-
-
-@numba.njit(cache=True, parallel=True)
-def _clamp_kernel(
-    queries: FloatArray,
-    rows: IntArray,
-    vertices: FloatArray,
-    edges: IntArray,
-    normals: FloatArray,
-    corners: IntArray,
-    index: IntArray,
-    weights: FloatArray,
-    gap: FloatArray,
-) -> None:
-    # Nearest point of the boundary arcs and corners to each query. On the great circle of arc
-    # (a, b) with unit normal n the nearest point is p = normalize(q - (q . n) n); it lies on the
-    # arc when (a x p) . n and (p x b) . n are both >= 0, and those are its coordinates in a and b
-    # times |a x b|: the planar barycentric coordinates on the chord, as inside the triangles.
-    for r in numba.prange(rows.shape[0]):
-        row = rows[r]
-        x, y, z = queries[row, 0], queries[row, 1], queries[row, 2]
-        best = -np.inf
-        first = corners[0]
-        second = corners[0]
-        wa = 1.0
-        px, py, pz = vertices[first, 0], vertices[first, 1], vertices[first, 2]
-        for c in range(corners.shape[0]):
-            v = corners[c]
-            dot = x * vertices[v, 0] + y * vertices[v, 1] + z * vertices[v, 2]
-            if dot > best:
-                best = dot
-                first = v
-                second = v
-                wa = 1.0
-                px, py, pz = vertices[v, 0], vertices[v, 1], vertices[v, 2]
-        for e in range(edges.shape[0]):
-            nx, ny, nz = normals[e, 0], normals[e, 1], normals[e, 2]
-            h = x * nx + y * ny + z * nz
-            sx, sy, sz = x - h * nx, y - h * ny, z - h * nz
-            norm = math.sqrt(sx * sx + sy * sy + sz * sz)
-            if norm <= best or norm < 1e-12:  # q . p = norm: not nearer than the best so far
-                continue
-            sx, sy, sz = sx / norm, sy / norm, sz / norm
-            a, b = edges[e, 0], edges[e, 1]
-            ax, ay, az = vertices[a, 0], vertices[a, 1], vertices[a, 2]
-            bx, by, bz = vertices[b, 0], vertices[b, 1], vertices[b, 2]
-            beta = (ay * sz - az * sy) * nx + (az * sx - ax * sz) * ny + (ax * sy - ay * sx) * nz
-            alpha = (sy * bz - sz * by) * nx + (sz * bx - sx * bz) * ny + (sx * by - sy * bx) * nz
-            if alpha < 0.0 or beta < 0.0 or alpha + beta <= 0.0:
-                continue
-            best = norm
-            first = a
-            second = b
-            wa = alpha / (alpha + beta)
-            px, py, pz = sx, sy, sz
-        index[row, 0] = first
-        index[row, 1] = second
-        index[row, 2] = first
-        weights[row, 0] = wa
-        weights[row, 1] = 1.0 - wa
-        weights[row, 2] = 0.0
-        gap[row] = math.sqrt((x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2)

@@ -15,20 +15,20 @@ sent; the sweep planner uses :func:`pose_violation` to skip and list unsafe pair
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from core.directions import angle_between, direction_from_angles_deg
 from core.errors import ConfigError, SafetyError
 from rig.config_schema import Table
 from rig.pose import RigPose
 
-if TYPE_CHECKING:
-    from rig.config import RigConfig
-
 __all__ = [
     "ZONE_AXES",
+    "AxisLimits",
     "ForbiddenZone",
+    "GuardedRig",
     "SafetyConfig",
     "check_path",
     "check_pose",
@@ -190,7 +190,35 @@ def safety_to_dict(safety: SafetyConfig) -> dict[str, Any]:
     }
 
 
-def pose_violation(config: RigConfig, pose: RigPose) -> str | None:
+class AxisLimits(Protocol):
+    """An axis's soft limits, degrees."""
+
+    @property
+    def min_deg(self) -> float:
+        """The lowest angle the axis may be commanded to."""
+        ...
+
+    @property
+    def max_deg(self) -> float:
+        """The highest angle the axis may be commanded to."""
+        ...
+
+
+class GuardedRig(Protocol):
+    """What the checks read of a rig config (:class:`rig.config.RigConfig`): limits and zones."""
+
+    @property
+    def axes(self) -> Mapping[str, AxisLimits]:
+        """The rig's axes by role."""
+        ...
+
+    @property
+    def safety(self) -> SafetyConfig:
+        """The config's ``[safety]`` section."""
+        ...
+
+
+def pose_violation(config: GuardedRig, pose: RigPose) -> str | None:
     """Why ``pose`` is unsafe for the rig, or None when it is safe.
 
     Checks, in order: every axis within its soft limits (a turntable angle needs a turntable
@@ -219,7 +247,7 @@ def pose_violation(config: RigConfig, pose: RigPose) -> str | None:
     return None
 
 
-def check_pose(config: RigConfig, pose: RigPose) -> None:
+def check_pose(config: GuardedRig, pose: RigPose) -> None:
     """Raise :class:`SafetyError` naming the axis and limit, or the zone, if pose is unsafe."""
     problem = pose_violation(config, pose)
     if problem is not None:
@@ -227,7 +255,7 @@ def check_pose(config: RigConfig, pose: RigPose) -> None:
 
 
 def path_violation(
-    config: RigConfig, start: RigPose, end: RigPose, *, step_deg: float | None = None
+    config: GuardedRig, start: RigPose, end: RigPose, *, step_deg: float | None = None
 ) -> str | None:
     """Why the straight move from start to end is unsafe, or None.
 
@@ -252,14 +280,14 @@ def path_violation(
 
 
 def path_is_safe(
-    config: RigConfig, start: RigPose, end: RigPose, *, step_deg: float | None = None
+    config: GuardedRig, start: RigPose, end: RigPose, *, step_deg: float | None = None
 ) -> bool:
     """Whether every sampled pose of the straight move from start to end is safe."""
     return path_violation(config, start, end, step_deg=step_deg) is None
 
 
 def check_path(
-    config: RigConfig, start: RigPose, end: RigPose, *, step_deg: float | None = None
+    config: GuardedRig, start: RigPose, end: RigPose, *, step_deg: float | None = None
 ) -> None:
     """Raise :class:`SafetyError` when the straight move from start to end is unsafe."""
     problem = path_violation(config, start, end, step_deg=step_deg)

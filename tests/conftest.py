@@ -10,4 +10,3 @@ from core.sample_data import panorama_path
 @pytest.fixture(scope="session")
 def courtyard_path() -> Path:
     return panorama_path("courtyard")
-

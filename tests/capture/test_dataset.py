@@ -14,12 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from capture.dataset import (
-    SCHEMA_VERSION,
-    Dataset,
-    ImageKey,
-    ImageRecord,
-)
+from capture.dataset import Dataset, ImageKey
+from capture.manifest import SCHEMA_VERSION, ImageRecord
 from core.errors import DatasetError, InputError
 
 POSE = {

@@ -12,16 +12,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from capture.grid_plan import grid_plan
 from capture.journal import ImageKey
-from capture.plan import (
-    IMAGE_OVERHEAD_S,
-    CalibrationCapture,
-    CaptureEvent,
-    SweepPlan,
-    grid_plan,
-    load_plan,
-    parse_plan,
-)
+from capture.plan import IMAGE_OVERHEAD_S, CalibrationCapture, CaptureEvent, SweepPlan
+from capture.plan_file import load_plan, parse_plan
 from capture.plan_order import move_seconds
 from core.directions import direction_from_angles_deg
 from core.errors import InputError

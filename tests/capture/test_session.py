@@ -16,14 +16,15 @@ import pytest
 
 from app.cli import main
 from capture.dataset import Dataset
+from capture.grid_plan import grid_plan
 from capture.journal import read_journal
-from capture.plan import SweepPlan, grid_plan
+from capture.plan import SweepPlan
 from capture.session import CaptureSession, SessionResult, SessionState
 from core.errors import DeviceError
 from rig.config import RigConfig
 from rig.config_cameras import CameraFaultConfig
 from rig.hardware import Rig
-from sim.dynamixel_emulator import FaultConfig
+from sim.dynamixel_faults import FaultConfig
 from sim.grbl_emulator import GrblFaults
 from sim.simulated_rig import SimulatedRig, simulated_capture_config
 

@@ -9,7 +9,8 @@ import pytest
 
 from capture.calibration_plan import with_calibration_captures
 from capture.dataset import Dataset
-from capture.plan import CaptureEvent, SweepPlan, grid_plan
+from capture.grid_plan import grid_plan
+from capture.plan import CaptureEvent, SweepPlan
 from capture.session import CaptureSession
 from core.errors import InputError
 from rig.config import RigConfig

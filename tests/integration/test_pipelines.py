@@ -13,7 +13,7 @@ import numpy as np
 
 from app.cli import main
 from capture.dataset import Dataset
-from capture.plan import grid_plan
+from capture.grid_plan import grid_plan
 from capture.session import CaptureSession
 from core.field_store import ReflectanceField
 from core.sample_data import panorama_path, rti_capture_path

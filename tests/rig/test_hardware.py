@@ -10,7 +10,7 @@ from core.errors import DeviceError, SafetyError
 from rig.config import simulated_config
 from rig.hardware import servo_axis
 from rig.pose import RigPose
-from sim.dynamixel_emulator import FaultConfig
+from sim.dynamixel_faults import FaultConfig
 from sim.grbl_emulator import GrblFaults
 from sim.simulated_rig import SimulatedRig
 

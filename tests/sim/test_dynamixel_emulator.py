@@ -26,14 +26,9 @@ from dynamixel_sdk import (
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sim.dynamixel_emulator import (
-    FaultConfig,
-    ServoChainEmulator,
-    ServoSpec,
-    TrapezoidMove,
-    acceleration_ticks_per_s2,
-    velocity_ticks_per_s,
-)
+from sim.dynamixel_emulator import ServoChainEmulator
+from sim.dynamixel_faults import FaultConfig
+from sim.dynamixel_motion import TrapezoidMove, acceleration_ticks_per_s2, velocity_ticks_per_s
 from sim.dynamixel_protocol import (
     Instruction,
     PacketParser,
@@ -44,6 +39,7 @@ from sim.dynamixel_protocol import (
     stuff,
     unstuff,
 )
+from sim.dynamixel_servo import ServoSpec
 
 PH = PacketHandler(2.0)
 
