@@ -19,7 +19,7 @@ from core.errors import InputError
 from sim.scenes import build_scene
 from sim.sensor import Sensor
 
-__all__ = ["SimulatedSources", "simulated_capture_sources"]
+__all__ = ["SimulatedSources", "sensor_radiance_scale", "simulated_capture_sources"]
 
 
 @dataclass(frozen=True)
