@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import signal
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -11,7 +12,7 @@ from capture.calibration_plan import with_calibration_captures
 from core.errors import InputError
 from sim.simulated_rig import simulated_capture_config
 
-__all__ = ["add_capture", "console_placer"]
+__all__ = ["add_capture", "console_fault_handler", "console_placer"]
 
 #: What a person is asked to put at the object's place, by calibration capture name.
 TARGET_WORDS = {
@@ -78,6 +79,13 @@ def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
     e.set_defaults(handler=_run_export_lp)
 
 
+def console_fault_handler(reason: str) -> bool:
+    """Tell the person at the rig what faulted; True once they say it is fixed."""
+    print(f"\ndevice fault: {reason}")
+    answer = input("fix its cause, then press Enter to clear it and go on (or q to pause) ")
+    return answer.strip().lower() not in ("q", "quit")
+
+
 def console_placer(name: str | None) -> None:
     """Ask the person at the rig to put ``name`` (None: the object) in place; waits for Enter."""
     what = "the object" if name is None else TARGET_WORDS.get(name, f"the {name} target")
@@ -121,7 +129,8 @@ def _run_capture(args: argparse.Namespace) -> int:
             plan=plan.to_dict(),
             planned=plan.planned_keys(config),
         )
-    result = _capture(config, dataset, plan, progress=not args.quiet)
+    with dataset.lock:  # before the rig's ports are opened: one capture per dataset
+        result = _capture(config, dataset, plan, progress=not args.quiet)
     print(
         f"{result.exit_status}: {result.taken} images taken, {result.already_done} already "
         f"there, {result.retaken} re-taken -> {dataset.path}"
@@ -132,25 +141,45 @@ def _run_capture(args: argparse.Namespace) -> int:
 
 
 def _capture(config: Any, dataset: Any, plan: Any, *, progress: bool) -> Any:
-    """Run the plan on the config's rig (simulated rigs are started here)."""
+    """Run the plan on the devices the config names.
+
+    A config whose ports are :data:`rig.config.IN_PROCESS_PORT` (``rig capture --sim``) gets
+    the simulated rig started here; any other config drives the ports it names, with the
+    simulated camera when that is its camera (a rig of ``rig sim start``, or real controllers).
+    """
     import contextlib
 
     from capture.session import CaptureSession
     from rig.cameras import open_camera
+    from rig.config import IN_PROCESS_PORT
     from rig.hardware import Rig
+    from sim.simulated_rig import SimulatedRig, simulated_camera
 
     with contextlib.ExitStack() as stack:
         placer: Any = console_placer
-        if config.camera.backend == "simulated":
-            from sim.simulated_rig import SimulatedRig
-
+        ports = {p.port for p in (config.servos, config.gantry) if p is not None}
+        if ports == {IN_PROCESS_PORT}:
             simulated = stack.enter_context(SimulatedRig(config))
             rig = simulated.rig()
-            placer = rig.camera.place_target  # type: ignore[union-attr]
+        elif IN_PROCESS_PORT in ports:
+            raise InputError(
+                f"the rig config names {IN_PROCESS_PORT} for some devices and real ports for "
+                "others; name every device's port, or none (--sim)"
+            )
         else:
-            rig = Rig(config, open_camera(config))
+            rig = Rig(config)
+            if config.camera.backend == "simulated":
+                rig.camera = simulated_camera(rig)
+            else:
+                rig.camera = open_camera(config)
+        if config.camera.backend == "simulated":
+            placer = rig.camera.place_target  # type: ignore[union-attr]
         stack.enter_context(rig)
-        session = CaptureSession(rig, dataset, plan, progress=progress, targets=placer)
+        # A person at the terminal can fix a fault and go on; unattended, the run pauses.
+        handler = console_fault_handler if sys.stdin.isatty() else None
+        session = CaptureSession(
+            rig, dataset, plan, progress=progress, targets=placer, on_fault=handler
+        )
         previous = signal.getsignal(signal.SIGINT)
 
         def on_interrupt(number: int, frame: Any) -> None:

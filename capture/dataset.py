@@ -30,6 +30,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from capture.dataset_lock import DatasetLock
 from capture.journal import JOURNAL_NAME, ImageKey, Journal, JournalContents, read_journal
 from capture.manifest import (
     IMAGES_DIR,
@@ -71,6 +72,8 @@ class Dataset:
         self.calibration = calibration
         self.planned = planned
         self.journal: JournalContents | None = None
+        self.lock = DatasetLock(path)
+        """Held while a capture writes into the dataset (one process at a time)."""
         self._records: dict[ImageKey, ImageRecord] = {}
         self._files: dict[str, ImageKey] = {}
         for record in records:

@@ -42,11 +42,13 @@ from core.errors import DeviceError, DeviceFault, RigError, SafetyError
 from rig.config import RigConfig
 from rig.devices import Frame
 from rig.pose import RigPose
+from rig.safety import describe_pose, pose_violation
 
 __all__ = [
     "TRANSITIONS",
     "CaptureRig",
     "CaptureSession",
+    "FaultHandler",
     "SessionResult",
     "SessionState",
     "TargetPlacer",
@@ -56,6 +58,8 @@ __all__ = [
 #: "charuco", "mirror-sphere", "white-target") at the object's place, or the object back (None);
 #: returns when it is there (a console prompt on a real rig, a scene switch on the simulated one).
 TargetPlacer = Callable[[str | None], None]
+#: Told a device fault in words; True once the operator has fixed its cause.
+FaultHandler = Callable[[str], bool]
 
 
 class SessionState(enum.StrEnum):
@@ -107,6 +111,14 @@ class CaptureRig(Protocol):
         """Light off, then move to the config's park pose; the pose reached."""
         ...
 
+    def pose(self) -> RigPose:
+        """The measured pose of every axis."""
+        ...
+
+    def clear_faults(self) -> str:
+        """Clear the devices' own faults (unlock or home, reboot); what was done, in words."""
+        ...
+
     def stop(self) -> None:
         """Stop every axis now."""
         ...
@@ -147,6 +159,12 @@ class CaptureSession:
     targets : TargetPlacer, optional
         Called before an image whose target (a calibration capture's name, None for the object)
         differs from the one in place; a fresh run starts with the object in place.
+    on_fault : FaultHandler, optional
+        A device reported a fault of its own (a GRBL alarm, a servo's hardware error): called
+        with the reason; True means the operator has fixed the cause, and the session clears
+        the fault (unlock or home, reboot) and takes the image again; False (or no handler)
+        pauses the run with the reason, for ``rig capture --resume`` once it is fixed. Like a
+        suspender: a fault a reset clears need not fail the run.
     """
 
     def __init__(
@@ -159,6 +177,7 @@ class CaptureSession:
         capture_retries: int = 2,
         progress: bool = True,
         targets: TargetPlacer | None = None,
+        on_fault: FaultHandler | None = None,
     ) -> None:
         self.rig = rig
         self.dataset = dataset
@@ -167,6 +186,7 @@ class CaptureSession:
         self.capture_retries = capture_retries
         self.progress = progress
         self.targets = targets
+        self.on_fault = on_fault
         self._target: str | None = None  # what stands at the object's place
         self._target_known = True
         self.state = SessionState.IDLE
@@ -207,7 +227,18 @@ class CaptureSession:
         return pending, len(events) - len(pending), len(retake), previous
 
     def run(self) -> SessionResult:
-        """Take every pending image; returns how the run ended (never raises a RigError)."""
+        """Take every pending image; returns how the run ended.
+
+        Raises
+        ------
+        DatasetError
+            Another process captures into the dataset (its lock is held); nothing was done.
+            Every other failure ends the run, with its reason, in the result.
+        """
+        with self.dataset.lock:
+            return self._run()
+
+    def _run(self) -> SessionResult:
         self._to(SessionState.RUNNING)
         start = time.perf_counter()
         pending, already, retaken, previous = self._pending()
@@ -231,12 +262,27 @@ class CaptureSession:
             disable=not self.progress,
         )
         try:
-            for event in pending:
+            if pending:
+                self._leave_unsafe_start()
+            index = 0
+            while index < len(pending):
                 if self._pause.is_set():
                     self._to(SessionState.PAUSING)
                     status, reason = "paused", "pause requested (Ctrl-C); resume to continue"
                     break
-                self._take(event, journal)
+                try:
+                    self._take(pending[index], journal)
+                except DeviceFault as fault:
+                    if self._suspend(fault):
+                        continue  # cleared: the same image again
+                    self._to(SessionState.PAUSING)
+                    status = "paused"
+                    reason = (
+                        f"{fault}; a reset or reboot clears this fault: fix its cause, then "
+                        "resume the capture (rig capture --resume DATASET)"
+                    )
+                    break
+                index += 1
                 taken += 1
                 bar.update(1)
         except KeyboardInterrupt:
@@ -300,6 +346,33 @@ class CaptureSession:
         )
         journal.event(record, time_start=time_start, time_end=time_end)
         self._seconds["store"] += time.perf_counter() - started
+
+    def _suspend(self, fault: DeviceFault) -> bool:
+        """Ask the operator (if anyone is asked) and clear the fault; True to go on."""
+        if self.on_fault is None or not self.on_fault(str(fault)):
+            return False
+        self._pose = None  # where the fault left the rig is not where it was sent
+        self.rig.clear_faults()
+        return True
+
+    def _leave_unsafe_start(self) -> None:
+        """Park first when the rig stands where it may not be.
+
+        A controller that powered up at machine zero, say: the park route leads out of it, or
+        nothing moves and the reason says what to do.
+        """
+        here = self.rig.pose()
+        problem = pose_violation(self.rig.config, here)
+        if problem is None:
+            return
+        try:
+            self.rig.park()
+        except SafetyError as error:
+            raise SafetyError(
+                f"the rig starts at {describe_pose(here)}, which is unsafe ({problem}), and no "
+                f"route to the park pose leads out of it ({error}); move the camera and the light "
+                "apart by hand (or home the gantry), then resume the capture"
+            ) from error
 
     def _place(self, event: CaptureEvent) -> None:
         """Have the event's target (a calibration capture's, or the object) put in place."""

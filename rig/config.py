@@ -36,6 +36,7 @@ from rig.pose import REQUIRED_ROLES, ROLES, RigPose
 from rig.safety import ForbiddenZone, SafetyConfig, parse_safety, pose_violation, safety_to_dict
 
 __all__ = [
+    "IN_PROCESS_PORT",
     "SCHEMA_VERSION",
     "AxisConfig",
     "CameraConfig",
@@ -56,6 +57,9 @@ __all__ = [
 ]
 
 SCHEMA_VERSION = 1
+#: The serial port of a simulated rig's devices in a config that ``rig capture --sim`` (or any
+#: caller of :class:`sim.simulated_rig.SimulatedRig`) starts in its own process: no device.
+IN_PROCESS_PORT = "/dev/null"
 #: Dynamixel model number of the XM430-W350 (the control table of issue 5).
 XM430_W350 = 1020
 _SERVO_KEYS = ("servo_id", "gear_ratio", "velocity_deg_s")

@@ -11,11 +11,11 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
-from core.errors import RigError
+from core.errors import RigError, SafetyError
 from rig.devices import Camera
 from rig.hardware import LightGantry, Rig, ServoArm
 from rig.pose import RigPose
-from rig.safety import pose_violation
+from rig.safety import describe_pose, pose_violation
 
 __all__ = ["DoctorCheck", "format_checks", "run_doctor"]
 
@@ -108,7 +108,13 @@ def _nudge(rig: Rig, start: RigPose, role: str) -> Callable[[], str]:
     def action() -> str:
         target = _nudged(rig, start, role)
         if target is None:
-            return "skipped: no safe direction to move"
+            # An axis that did not move has not been checked: that is a failure to report.
+            problem = pose_violation(rig.config, start)
+            why = f" (the start pose is unsafe: {problem})" if problem else ""
+            raise SafetyError(
+                f"not checked: no safe direction to move {NUDGE_DEG:g} deg from "
+                f"{describe_pose(start)}{why}; park the rig, then run the doctor again"
+            )
         there = rig.move_to(target)
         back = rig.move_to(start)
         assert there is not None and back is not None

@@ -18,9 +18,10 @@ error bits) is :mod:`rig.dynamixel_table`.
 from __future__ import annotations
 
 import math
+import termios
 import threading
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
@@ -145,6 +146,10 @@ class _PortHandler(PortHandler):  # type: ignore[misc]
         super().__init__(port_name)
         self._latency_ms = latency_ms
 
+    def set_latency(self, latency_ms: float) -> None:
+        """Allow ``latency_ms`` beyond the transmission time for the next replies."""
+        self._latency_ms = latency_ms
+
     def setPacketTimeout(self, packet_length: int) -> None:
         self.packet_start_time = self.getCurrentTime()
         self.packet_timeout = self.tx_time_per_byte * packet_length + self._latency_ms
@@ -202,6 +207,7 @@ class DynamixelChain:
         self._port: Any = None
         self._lock = threading.RLock()
         self._targets: dict[str, int] = {}
+        self._patience = 1  # the current attempt's factor on reply latency and backoff
 
     @staticmethod
     def _check_axes(port: str, axes: Sequence[ServoAxisConfig]) -> None:
@@ -343,7 +349,7 @@ class DynamixelChain:
         for axis in axes:
             group.addParam(axis.id, list(ticks[axis.role].to_bytes(4, "little", signed=True)))
         result = COMM_SUCCESS
-        for _ in range(self._retries + 1):
+        for _ in self._attempts():
             result = group.txPacket()
             if result == COMM_SUCCESS:
                 break
@@ -483,15 +489,35 @@ class DynamixelChain:
     def _comm(self, result: int) -> str:
         return str(self._ph.getTxRxResult(result)).removeprefix("[TxRxResult] ")
 
+    def _attempts(self) -> Iterator[int]:
+        """Attempt numbers of one transaction, each allowing twice the reply latency before.
+
+        A real servo answers within a millisecond; a loaded host (or an emulator sharing its
+        cores) may not read the reply for tens of milliseconds. Doubling the allowance per
+        attempt keeps the usual case fast and a busy machine from failing the transaction.
+        """
+        try:
+            for attempt in range(self._retries + 1):
+                self._patience = 2**attempt
+                self._port.set_latency(self._latency_ms * self._patience)
+                yield attempt
+        finally:
+            self._patience = 1
+            if self._port is not None:
+                self._port.set_latency(self._latency_ms)
+
     def _recover(self) -> None:
-        # A reply may still be on its way; wait it out and drop it so that the next
-        # transaction cannot mistake it for its own.
-        time.sleep(self._backoff_s)
-        self._port.clearPort()
+        # A reply may still be on its way; wait it out (as long again as the attempt waited)
+        # and drop it, so that the next transaction cannot mistake it for its own.
+        time.sleep(self._patience * (self._backoff_s + self._latency_ms / 1000.0))
+        try:
+            self._port.clearPort()
+        except (OSError, termios.error) as exc:
+            raise DeviceError(f"{self._port_name}: the serial port failed: {exc}") from exc
 
     def _check_model(self, axis: ServoAxisConfig) -> None:
         last = ""
-        for _ in range(self._retries + 1):
+        for _ in self._attempts():
             model, result, _ = self._ph.ping(self._port, axis.id)
             if result == COMM_SUCCESS:
                 if model != axis.model_number:
@@ -532,7 +558,7 @@ class DynamixelChain:
 
     def _read(self, axis: ServoAxisConfig, item: Item, *, tolerate_alert: bool = False) -> int:
         last = ""
-        for _ in range(self._retries + 1):
+        for _ in self._attempts():
             data, result, error = self._ph.readTxRx(self._port, axis.id, item.address, item.size)
             if result == COMM_SUCCESS and len(data) == item.size:
                 if error & 0x7F == tbl.RESULT_CRC:
@@ -555,7 +581,7 @@ class DynamixelChain:
             action += f" ({_deg(axis, value):.2f} deg)"
         data = list(value.to_bytes(item.size, "little", signed=item.signed))
         last = ""
-        for _ in range(self._retries + 1):
+        for _ in self._attempts():
             result, error = self._ph.writeTxRx(self._port, axis.id, item.address, item.size, data)
             if result == COMM_SUCCESS and error & 0x7F != tbl.RESULT_CRC:
                 self._check_status(axis, error, action, tolerate_alert)
@@ -585,7 +611,7 @@ class DynamixelChain:
         """(Goal Position, Moving, Present Position) per role, by one read or one Sync Read."""
         address, size = tbl.STATE_BLOCK
         last = ""
-        for _ in range(self._retries + 1):
+        for _ in self._attempts():
             replies, last = self._read_block(axes, address, size)
             if replies is None:
                 self._recover()
@@ -658,7 +684,7 @@ class DynamixelChain:
 
     def _reboot(self, axis: ServoAxisConfig, boot_timeout_s: float = 2.0) -> None:
         status = 0
-        for _ in range(self._retries + 1):
+        for _ in self._attempts():
             result, error = self._ph.reboot(self._port, axis.id)
             if result == COMM_SUCCESS and error & 0x7F:
                 self._check_status(axis, error, "reboot", True)

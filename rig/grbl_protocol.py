@@ -16,16 +16,20 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 
 from core.errors import InputError
 
 __all__ = [
     "ALARM_CODES",
+    "CHECK_LIMITS_MESSAGE",
+    "CRITICAL_ALARMS",
     "CRITICAL_ALARM_MESSAGE",
     "ERROR_CODES",
     "MACHINE_STATES",
+    "MM_PER_INCH",
+    "SELF_RESETTING_ALARMS",
     "GrblStatus",
     "Reply",
     "ReplyKind",
@@ -34,8 +38,11 @@ __all__ = [
     "classify",
     "error_meaning",
     "format_number",
+    "parse_modal_state",
     "parse_setting",
+    "parse_startup_lines",
     "parse_status",
+    "scaled_status",
     "validate_command",
 ]
 
@@ -102,7 +109,19 @@ ALARM_CODES: dict[int, str] = {
 """GRBL 1.1 ``ALARM:N`` codes and their meanings."""
 
 CRITICAL_ALARM_MESSAGE = "[MSG:Reset to continue]"
-"""Sent right after ALARM:1 or ALARM:2; GRBL then ignores everything but a soft reset."""
+"""Sent some time after ALARM:1 or ALARM:2 (about 500 ms on GRBL 1.1h); a soft reset that
+arrives before it is discarded, and GRBL ignores everything but a reset until one comes."""
+
+CHECK_LIMITS_MESSAGE = "[MSG:Check Limits]"
+"""Sent after the banner of a reset while a limit switch is still pressed (GRBL stays in Alarm)."""
+
+#: Alarms after which GRBL resets itself (a failed homing cycle): its banner follows.
+SELF_RESETTING_ALARMS = frozenset({6, 7, 8, 9})
+#: Alarms after which GRBL serves nothing but a soft reset.
+CRITICAL_ALARMS = frozenset({1, 2})
+
+#: Inches to millimetres: status reports are in inches with ``$13=1``.
+MM_PER_INCH = 25.4
 
 MACHINE_STATES = ("Idle", "Run", "Hold", "Jog", "Alarm", "Door", "Check", "Home", "Sleep")
 
@@ -115,6 +134,7 @@ _BANNER = re.compile(r"^Grbl (\d+\.\d+[a-z]?) \['\$' for help\]$")
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)"
 _SETTING = re.compile(rf"^\$(\d+)=({_NUMBER})$")
 _CODE = re.compile(r"^(error|ALARM):(\d+)$")
+_STORED_LINE = re.compile(r"^\$N\d=")
 
 
 def error_meaning(code: int) -> str:
@@ -138,7 +158,8 @@ class ReplyKind(Enum):
     MESSAGE = "message"  # [MSG:...]
     FEEDBACK = "feedback"  # [GC:...], [VER:...], [G54:...] and other bracketed data
     SETTING = "setting"  # $N=value
-    STARTUP = "startup"  # >line:ok
+    STARTUP = "startup"  # >line:ok, a startup line's echo after a reset
+    STORED_LINE = "stored line"  # $N0=line, a line of the $N listing
     EMPTY = "empty"
     UNKNOWN = "unknown"
 
@@ -173,6 +194,8 @@ def classify(line: str) -> Reply:
         return Reply(ReplyKind.FEEDBACK, text)
     if _SETTING.match(text):
         return Reply(ReplyKind.SETTING, text)
+    if _STORED_LINE.match(text):
+        return Reply(ReplyKind.STORED_LINE, text)
     if text.startswith(">") and (text.endswith(":ok") or ":error:" in text):
         return Reply(ReplyKind.STARTUP, text)
     return Reply(ReplyKind.UNKNOWN, text)
@@ -317,6 +340,50 @@ def parse_status(line: str) -> GrblStatus:
     if "overrides" in values and "accessories" not in values:
         values["accessories"] = ""  # Ov without A means spindle and coolant are off.
     return GrblStatus(**values)  # type: ignore[arg-type]
+
+
+def scaled_status(status: GrblStatus, factor: float) -> GrblStatus:
+    """The report with positions, offsets and feed multiplied by ``factor`` (inches to mm)."""
+    if factor == 1.0:
+        return status
+
+    def scale(vector: Vector3 | None) -> Vector3 | None:
+        if vector is None:
+            return None
+        return (vector[0] * factor, vector[1] * factor, vector[2] * factor)
+
+    return replace(
+        status,
+        mpos=scale(status.mpos),
+        wpos=scale(status.wpos),
+        wco=scale(status.wco),
+        feed=None if status.feed is None else status.feed * factor,
+    )
+
+
+def parse_modal_state(line: str) -> frozenset[str]:
+    """The words of a ``$G`` report (``[GC:G0 G54 G17 G21 G90 G94 M5 M9 T0 F0 S0]``).
+
+    Raises
+    ------
+    ValueError
+        The line is not a ``[GC:...]`` report.
+    """
+    text = line.strip()
+    if not (text.startswith("[GC:") and text.endswith("]")):
+        raise ValueError(f"not a GRBL modal state report: {line!r}")
+    return frozenset(text[4:-1].split())
+
+
+def parse_startup_lines(lines: list[str]) -> dict[int, str]:
+    """The startup lines of a ``$N`` listing (``$N0=G20``, ``$N1=``), by number; empty kept."""
+    found: dict[int, str] = {}
+    for line in lines:
+        text = line.strip()
+        number, sep, value = text[2:].partition("=")
+        if text.startswith("$N") and sep and number.isdigit():
+            found[int(number)] = value
+    return found
 
 
 def format_number(value: float) -> str:

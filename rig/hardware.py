@@ -19,13 +19,13 @@ from collections.abc import Mapping
 from dataclasses import replace
 from types import TracebackType
 
-from core.errors import DeviceError, InputError, RigError
+from core.errors import DeviceError, InputError, RigError, SafetyError
 from rig.config import XM430_W350, AxisConfig, RigConfig
 from rig.devices import Camera, Frame, LightState, close_after
 from rig.dynamixel import DynamixelChain, ServoAxisConfig
 from rig.grbl import GantryAxes, GantryAxisConfig, GrblGantry
 from rig.pose import RigPose
-from rig.safety import check_path, check_pose, path_violation, pose_violation
+from rig.safety import check_path, check_pose, escape_violation, pose_violation
 
 __all__ = ["LightGantry", "Rig", "ServoArm", "gantry_axis", "servo_axis"]
 
@@ -66,6 +66,8 @@ def gantry_axis(axis: AxisConfig) -> GantryAxisConfig:
         offset_deg=axis.offset_deg,
         direction=1 if axis.direction > 0 else -1,
         units_per_deg=axis.units_per_deg,
+        max_rate_deg_min=axis.feed_deg_min,
+        acceleration_deg_s2=axis.acceleration_deg_s2,
     )
 
 
@@ -122,6 +124,15 @@ class ServoArm:
             default=0.0,
         )
 
+    def clear_faults(self) -> str:
+        """Reboot every servo reporting a hardware error, then torque on; what was done."""
+        faulty = [role for role, errors in self.chain.hardware_errors().items() if errors]
+        for role in faulty:
+            self.chain.reboot(role)
+        if faulty:
+            self.chain.torque(True)
+        return f"rebooted {', '.join(faulty)}" if faulty else ""
+
     def stop(self) -> None:
         """Hold every servo at its present position (clamped to the soft limits)."""
         # Holding the present position is the servos' stop: the goal becomes where they are
@@ -170,10 +181,26 @@ class LightGantry:
         return ("light_azimuth", "light_inclination")
 
     def connect(self) -> None:
-        """Connect to GRBL, then run its homing cycle when the config asks for homing."""
+        """Connect to GRBL, then run its homing cycle when the config asks for homing.
+
+        Raises
+        ------
+        DeviceError
+            GRBL is locked in alarm and the config neither homes nor unlocks it: nothing of the
+            rig can move until an operator decides how.
+        """
         self.gantry.connect()
         if self.homing:
             self.gantry.home()
+        status = self.gantry.status()
+        if status.state == "Alarm":
+            needs = "homing ($22=1)" if self.gantry.homing_enabled else "an unlock"
+            raise DeviceError(
+                f"GRBL at {self.gantry.port} is locked in alarm and needs {needs} before "
+                "anything moves: set gantry.homing = true in the rig config to home on connect "
+                "(a gantry with limit switches), or place the gantry by hand and set "
+                "gantry.unlock_on_alarm = true (or send '$X' in a GRBL terminal)"
+            )
 
     def move_to_deg(self, targets: Mapping[str, float]) -> None:
         """Start a move of the light to ``{role: degrees}``; an axis not named keeps its place."""
@@ -206,6 +233,16 @@ class LightGantry:
         self.gantry.light_off()
         self.light = LightState()
         time.sleep(self.settle_s)
+
+    def clear_faults(self) -> str:
+        """Clear an alarm: home when the config homes, else unlock; what was done."""
+        if self.gantry.status().state != "Alarm":
+            return ""
+        if self.homing:
+            self.gantry.home()
+            return "homed the gantry"
+        self.gantry.unlock()
+        return "unlocked the gantry"
 
     def stop(self) -> None:
         """Stop motion and switch the light off, whatever state GRBL is in; never raises."""
@@ -302,7 +339,13 @@ class Rig:
         """
         check_pose(self.config, pose)
         start = self.pose()
-        check_path(self.config, start, pose)
+        if pose_violation(self.config, start) is None:
+            check_path(self.config, start, pose)
+        else:
+            # Only a move that leads out of the unsafe start (and never back) may start there.
+            problem = escape_violation(self.config, start, pose)
+            if problem is not None:
+                raise SafetyError(f"refused: {problem}")
         targets = dict(pose.items())
         begin = dict(start.items())
         seconds = 0.0
@@ -320,12 +363,19 @@ class Rig:
         for device in self.devices:
             device.wait_until_arrived(timeout_s)
 
+    def clear_faults(self) -> str:
+        """Clear every device's own faults (see each device); what was done, in words."""
+        done = [device.clear_faults() for device in self.devices]
+        return "; ".join(d for d in done if d) or "nothing to clear"
+
     def park(self) -> RigPose | None:
         """Light off, then move to the config's park pose by the first safe route.
 
         Routes tried: straight; the light first, then the camera; the camera first, then the
         light (a straight move may sweep the light past the camera where moving one arm at a
-        time does not).
+        time does not). From an unsafe pose (a controller that powered up at machine zero), the
+        first leg may start unsafe if it leads out and never back in
+        (:func:`rig.safety.escape_violation`).
         """
         self.gantry.light_off()
         here, park = self.pose(), self.config.park
@@ -343,7 +393,8 @@ class Rig:
         for route in routes:
             legs = zip((here, *route[:-1]), route, strict=True)
             if all(
-                pose_violation(self.config, b) is None and path_violation(self.config, a, b) is None
+                pose_violation(self.config, b) is None
+                and escape_violation(self.config, a, b) is None
                 for a, b in legs
             ):
                 reached = None

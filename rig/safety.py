@@ -33,6 +33,7 @@ __all__ = [
     "check_path",
     "check_pose",
     "describe_pose",
+    "escape_violation",
     "parse_safety",
     "path_is_safe",
     "path_violation",
@@ -254,6 +255,25 @@ def check_pose(config: GuardedRig, pose: RigPose) -> None:
         raise SafetyError(f"refused to move to {describe_pose(pose)}: {problem}")
 
 
+def _path_samples(
+    config: GuardedRig, start: RigPose, end: RigPose, step_deg: float | None
+) -> list[tuple[float, RigPose]]:
+    """(fraction, pose) along the straight move, no axis changing by more than the step."""
+    step = config.safety.path_step_deg if step_deg is None else step_deg
+    if not step > 0:
+        raise SafetyError(f"path sampling step must be positive, got {step}")
+    largest = max(abs(b - a) for (_, a), (_, b) in zip(start.items(), end.items(), strict=True))
+    count = max(1, math.ceil(largest / step))
+    return [(i / count, start.interpolate(end, i / count)) for i in range(count + 1)]
+
+
+def _unsafe_at(start: RigPose, end: RigPose, fraction: float, problem: str) -> str:
+    where = "at its start" if fraction == 0 else f"{fraction:.0%} of the way"
+    return (
+        f"the move from {describe_pose(start)} to {describe_pose(end)} is unsafe {where}: {problem}"
+    )
+
+
 def path_violation(
     config: GuardedRig, start: RigPose, end: RigPose, *, step_deg: float | None = None
 ) -> str | None:
@@ -264,18 +284,39 @@ def path_violation(
     ``safety.path_step_deg``) between samples, ends included. A zone thinner than the step in
     every direction could slip between samples: keep zones wider than the step.
     """
-    step = config.safety.path_step_deg if step_deg is None else step_deg
-    if not step > 0:
-        raise SafetyError(f"path sampling step must be positive, got {step}")
-    largest = max(abs(b - a) for (_, a), (_, b) in zip(start.items(), end.items(), strict=True))
-    count = max(1, math.ceil(largest / step))
-    for i in range(count + 1):
-        fraction = i / count
-        problem = pose_violation(config, start.interpolate(end, fraction))
+    for fraction, pose in _path_samples(config, start, end, step_deg):
+        problem = pose_violation(config, pose)
         if problem is not None:
-            where = "at its start" if i == 0 else f"{fraction:.0%} of the way"
-            move = f"the move from {describe_pose(start)} to {describe_pose(end)}"
-            return f"{move} is unsafe {where}: {problem}"
+            return _unsafe_at(start, end, fraction, problem)
+    return None
+
+
+def escape_violation(
+    config: GuardedRig, start: RigPose, end: RigPose, *, step_deg: float | None = None
+) -> str | None:
+    """Why the straight move does not lead out of an unsafe start into safety, or None.
+
+    A rig can be left unsafe (a controller that powered up at machine zero, a crash): the way
+    out is a move whose unsafe samples are all at its beginning (once safe, it stays safe to
+    the end) and along which the camera and the light never come closer together. For a safe
+    start this is :func:`path_violation`.
+    """
+    samples = _path_samples(config, start, end, step_deg)
+    leaving = True
+    closest = separation_deg(start)
+    for fraction, pose in samples:
+        problem = pose_violation(config, pose)
+        if problem is None:
+            leaving = False
+            continue
+        if not leaving:
+            return _unsafe_at(start, end, fraction, problem)
+        apart = separation_deg(pose)
+        if apart < closest - 1e-9:
+            return _unsafe_at(
+                start, end, fraction, f"{problem}, and it brings camera and light closer"
+            )
+        closest = apart
     return None
 
 

@@ -12,12 +12,14 @@ A thread serves the pty's master side like GRBL's serial interrupt and main loop
 bytes (``?``, ``!``, ``~``, 0x18) act at once wherever they come, even mid-line; bytes >= 0x80
 (overrides) are picked off and ignored; other bytes go into a 128-byte receive buffer, and bytes
 arriving while it is full are lost, as on the hardware. The buffer only fills while GRBL cannot
-read it (planner full, waiting for a G4/M-code synchronisation, homing, critical alarm), so a host
-that counts characters never loses any and one that does not may. The machine itself (parser,
-motion, states) is :class:`sim.grbl_machine.GrblMachine`.
+read it (planner full, waiting for a G4/M-code synchronisation, homing, after an alarm, asleep),
+so a host that counts characters never loses any and one that does not may; a reset (a soft
+one, or GRBL's own after a failed homing) empties it and drops a pending status request. The
+machine itself (parser, motion, states) is :class:`sim.grbl_machine.GrblMachine`.
 
 Faults (:class:`GrblFaults`) are deterministic for a seed: each kind draws from its own random
-stream, so one kind does not shift another.
+stream, so one kind does not shift another. Limit switches are pressed and released with
+:meth:`GrblEmulator.press_limit` and :meth:`GrblEmulator.release_limit`.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ import select
 import threading
 import time
 import tty
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import TracebackType
 
@@ -69,6 +71,8 @@ class GrblFaults:
     garbage : a line of noise bytes comes before an output line
     hard_limit_after_moves : ALARM:1 (hard limit) half-way through this motion block (1-based,
         counted from start; homing moves not counted)
+    homing_fails : ``$H`` fails with this alarm: 8 (the pull-off leaves the switch pressed) or
+        9 (no switch within the search distance); GRBL then resets itself
     """
 
     seed: int = 0
@@ -78,14 +82,16 @@ class GrblFaults:
     delay_s: float = 0.5
     garbage: FaultRule | None = None
     hard_limit_after_moves: int | None = None
+    homing_fails: int | None = None
 
 
 @dataclass(frozen=True)
 class LightState:
     """The light as the emulated controller drives it.
 
-    ``intensity`` is the spindle PWM duty (S / $30, in [0, 1]) when the spindle is on, 1.0 when
-    only the flood coolant pin is on, else 0.0.
+    ``intensity`` is the spindle PWM duty (the output speed / $30, in [0, 1]) while the PWM is
+    on, else 1.0 when the flood coolant pin is on, else 0.0. In laser mode (``$32=1``) the PWM
+    follows the motion (see :mod:`sim.grbl_spindle`).
     """
 
     on: bool
@@ -121,6 +127,10 @@ class GrblEmulator:
     faults : fault injection (none by default)
     rx_buffer_size : GRBL's serial receive buffer, 128 bytes on the Uno
     position : machine position at power-up, machine units
+    critical_message_delay_s : GRBL's pause after an ALARM line (500 ms): ``[MSG:Reset to
+        continue]`` comes that long after ALARM:1/2, and resets before it are discarded
+    startup_lines : the ``$N0``/``$N1`` lines stored at power-up (as GRBL filters them:
+        upper case, no spaces)
     """
 
     def __init__(
@@ -130,6 +140,8 @@ class GrblEmulator:
         faults: GrblFaults | None = None,
         rx_buffer_size: int = 128,
         position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        critical_message_delay_s: float = 0.5,
+        startup_lines: Sequence[str] = (),
     ) -> None:
         self.faults = faults or GrblFaults()
         self.rx_buffer_size = rx_buffer_size
@@ -148,6 +160,7 @@ class GrblEmulator:
         self._rx = bytearray()
         self._assembler = LineAssembler()
         self._status_pending = False
+        self._resets = 0
         self._out: list[tuple[float, bytes]] = []
         self._now = time.monotonic()
         seed = self.faults.seed
@@ -161,6 +174,9 @@ class GrblEmulator:
             self._emit,
             hard_limit_after_moves=self.faults.hard_limit_after_moves,
             position=position,
+            critical_message_delay_s=critical_message_delay_s,
+            startup_lines=startup_lines,
+            homing_fails=self.faults.homing_fails,
         )
 
     # -- life cycle -------------------------------------------------------------------------
@@ -176,7 +192,7 @@ class GrblEmulator:
         self.port = os.ttyname(self._slave)
         with self._lock:
             self._now = time.monotonic()
-            self._machine.power_up()
+            self._machine.power_up(self._now)
         self._thread = threading.Thread(target=self._serve, name="grbl-emulator", daemon=True)
         self._thread.start()
         # Once the power-up banner is on the pty, a client's open discards it (pyserial flushes
@@ -237,10 +253,12 @@ class GrblEmulator:
     def light(self) -> LightState:
         """The light: spindle PWM or flood coolant pin."""
         with self._lock:
+            self._advance()
             machine = self._machine
-            if machine.spindle != 5:
+            spindle, speed = machine.spindle.state(self._now)
+            if spindle != 5:
                 top = machine.settings[30]
-                duty = min(1.0, machine.spindle_speed / top) if top > 0 else 0.0
+                duty = min(1.0, speed / top) if top > 0 else 0.0
                 return LightState(duty > 0, duty, "spindle")
             if machine.flood:
                 return LightState(True, 1.0, "coolant")
@@ -258,19 +276,47 @@ class GrblEmulator:
             axes = GantryAxes(GantryAxisConfig("X", -1e9, 1e9), GantryAxisConfig("Y", -1e9, 1e9))
         return axes.angles(self.machine_position())
 
+    @property
+    def startup_lines(self) -> list[str]:
+        """The stored startup lines, ``$N0`` and ``$N1`` (empty strings when not set)."""
+        with self._lock:
+            return list(self._machine.startup_lines)
+
     def inject_alarm(self, code: int = 1) -> None:
-        """Raise ``ALARM:code`` now (1: a hard limit switch tripped)."""
+        """Raise ``ALARM:code`` now (1: a hard limit switch tripped, shown until the reset)."""
         with self._lock:
             self._advance()
             if code == 1:
-                self._machine.pins = "X"
+                self._machine.limits.trip("X")
             self._machine.raise_alarm(code, self._now)
+
+    def press_limit(self, letter: str) -> None:
+        """Press the limit switch of axis ``letter`` (``Pn:`` shows it; an edge with $21=1)."""
+        self._limit(letter, True)
+
+    def release_limit(self, letter: str) -> None:
+        """Release the limit switch of axis ``letter`` (also an edge: ALARM:1 with $21=1)."""
+        self._limit(letter, False)
+
+    def _limit(self, letter: str, pressed: bool) -> None:
+        with self._lock:
+            self._advance()
+            self._machine.limit_switch(letter, pressed, self._now)
 
     # -- serving ----------------------------------------------------------------------------
 
     def _advance(self) -> None:
         self._now = time.monotonic()
         self._machine.update(self._now)
+        self._note_reset()
+
+    def _note_reset(self) -> None:
+        """After a reset (a soft one, or GRBL's own) the receive buffer and requests are gone."""
+        if self._machine.resets != self._resets:
+            self._resets = self._machine.resets
+            self._rx.clear()
+            self._assembler.reset()
+            self._status_pending = False
 
     def _serve(self) -> None:
         while not self._stop.is_set():
@@ -310,10 +356,7 @@ class GrblEmulator:
         machine = self._machine
         if byte == 0x18:
             machine.soft_reset(self._now)
-            machine.pins = ""
-            self._rx.clear()
-            self._assembler.reset()
-            self._status_pending = False
+            self._note_reset()
         elif byte == ord("?"):
             self._status_pending = True  # several '?' before the report give one report
         elif byte == ord("!"):

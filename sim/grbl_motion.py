@@ -3,8 +3,9 @@
 Each block runs a trapezoidal profile along its straight line, with GRBL's per-axis limits
 (rate ``min(F, $11x / |u_i|)``, acceleration ``min($12x / |u_i|)``), from rest to rest (no
 junction speed between blocks: a simplification). The planner holds :data:`PLANNER_BLOCKS`
-blocks. Nothing here knows the machine's states: :class:`sim.grbl_machine.GrblMachine` decides
-when a block starts, holds or is dropped.
+blocks. Positions are in units (mm); GRBL counts steps, so a new steps/mm setting rescales the
+rest position (:meth:`Planner.rescale`). Nothing here knows the machine's states:
+:class:`sim.grbl_machine.GrblMachine` decides when a block starts, holds or is dropped.
 """
 
 from __future__ import annotations
@@ -111,6 +112,11 @@ class Block:
     done : distance covered before the current profile (a hold ends one profile mid-block)
     profile : the profile in progress, None while the block stands
     t0 : when the current profile started, s
+    spindle : the spindle state the block runs with (3 CW, 4 CCW, 5 off: the planner's condition
+        flags)
+    power : the spindle speed the block carries (0 for a laser-disabled motion: G0)
+    programmed : the programmed rate, units/s (``inf`` for a rapid); laser mode's M4 scales the
+        power by the speed over it
     """
 
     start: Vec
@@ -120,6 +126,9 @@ class Block:
     done: float = 0.0
     profile: Profile | None = None
     t0: float = 0.0
+    spindle: int = 5
+    power: float = 0.0
+    programmed: float = math.inf
 
     @property
     def length(self) -> float:
@@ -198,7 +207,15 @@ class Planner:
         """True when one more block does not fit (GRBL stops reading lines)."""
         return len(self.blocks) >= PLANNER_BLOCKS
 
-    def block_to(self, target: Vec, rate_min: float, settings: Mapping[int, float]) -> Block:
+    def block_to(
+        self,
+        target: Vec,
+        rate_min: float,
+        settings: Mapping[int, float],
+        *,
+        spindle: int = 5,
+        power: float = 0.0,
+    ) -> Block:
         """A block from the last planned target to ``target``, not yet queued.
 
         Parameters
@@ -206,6 +223,7 @@ class Planner:
         target : machine position, units
         rate_min : requested feed rate, units/min (``inf`` for a rapid)
         settings : GRBL settings, for the per-axis rates ``$11x`` and accelerations ``$12x``
+        spindle, power : the spindle state and speed the block carries (see :class:`Block`)
         """
         start = tuple(self.blocks[-1].end if self.blocks else self.rest)
         delta = [t - s for s, t in zip(start, target, strict=True)]
@@ -216,7 +234,15 @@ class Planner:
                 share = abs(d) / length
                 rate = min(rate, settings[110 + axis] / 60.0 / share)
                 accel = min(accel, settings[120 + axis] / share)
-        return Block((start[0], start[1], start[2]), target, rate, accel)
+        return Block(
+            (start[0], start[1], start[2]),
+            target,
+            rate,
+            accel,
+            spindle=spindle,
+            power=power,
+            programmed=rate_min / 60.0,
+        )
 
     def finish(self, block: Block) -> None:
         """``block``, the first, has reached its end: rest there and drop it."""
@@ -228,6 +254,16 @@ class Planner:
         self.rest = block.point(block.done)
         if block.done >= block.length - EPS:
             self.blocks.popleft()
+
+    def rescale(self, axis: int, factor: float) -> None:
+        """Multiply the rest position of ``axis`` by ``factor`` (its steps/mm changed).
+
+        GRBL keeps the position in steps, so a new ``$10x`` changes what the same steps mean
+        in units; only done at rest (``$`` settings need Idle or Alarm).
+        """
+        rest = list(self.rest)
+        rest[axis] *= factor
+        self.rest = (rest[0], rest[1], rest[2])
 
     def clear(self, position: Vec) -> None:
         """Drop every block and rest at ``position`` (an alarm or a reset)."""

@@ -1,7 +1,9 @@
 """GRBL 1.1's real-time status report: its fields and when ``WCO`` and ``Ov``/``A`` appear.
 
 Its fields are formatted as ``report.c`` does; counters decide when ``WCO`` and ``Ov``/``A`` are
-included.
+included. With ``$13=1`` positions and offsets are reported in inches with 4 decimals and the
+feed in inch/min with 1 decimal (``printFloat_CoordValue``/``printFloat_RateValue``); the
+machine keeps millimetres. The ``$#`` listing (:func:`ngc_parameter_lines`) follows the same rule.
 
 WCO comes in the first report after a reset or an offset change and then every 10 (idle) or 30
 (busy) reports; Ov every 10 (idle) or 20 (busy) reports and in the first after a spindle or
@@ -13,12 +15,33 @@ from __future__ import annotations
 
 from sim.grbl_motion import Vec
 
-__all__ = ["StatusReporter", "axes_text"]
+__all__ = ["StatusReporter", "axes_text", "ngc_parameter_lines"]
+
+_MM_PER_INCH = 25.4
 
 
-def axes_text(values: Vec) -> str:
-    """Three coordinates as GRBL prints them: ``x,y,z`` with 3 decimals, never ``-0.000``."""
-    return ",".join("0.000" if f"{v:.3f}" == "-0.000" else f"{v:.3f}" for v in values)
+def axes_text(values: Vec, *, inches: bool = False) -> str:
+    """Three coordinates as GRBL prints them: ``x,y,z`` with 3 decimals (4 in inches).
+
+    Never ``-0.000``.
+    """
+    if inches:
+        values = (values[0] / _MM_PER_INCH, values[1] / _MM_PER_INCH, values[2] / _MM_PER_INCH)
+    digits = 4 if inches else 3
+    texts = [f"{v:.{digits}f}" for v in values]
+    return ",".join(t[1:] if t.startswith("-") and not t.strip("-0.") else t for t in texts)
+
+
+def ngc_parameter_lines(g92: Vec, *, inches: bool = False) -> list[str]:
+    """The ``$#`` listing: G54-G59, G28, G30 (all zero here), G92, TLO and PRB."""
+    zero = axes_text((0.0, 0.0, 0.0), inches=inches)
+    names = ("G54", "G55", "G56", "G57", "G58", "G59", "G28", "G30")
+    return [
+        *(f"[{name}:{zero}]" for name in names),
+        f"[G92:{axes_text(g92, inches=inches)}]",
+        f"[TLO:{'0.0000' if inches else '0.000'}]",
+        f"[PRB:{zero}:0]",
+    ]
 
 
 class StatusReporter:
@@ -51,6 +74,7 @@ class StatusReporter:
         flood: bool,
         mist: bool,
         pins: str,
+        inches: bool = False,
     ) -> str:
         """One status report; counts it against the refresh counters.
 
@@ -63,18 +87,19 @@ class StatusReporter:
         wco : work coordinate offset, units
         buffers : (free planner blocks, free receive-buffer bytes)
         feed : current feed rate, units/min
-        spindle : 3 CW, 4 CCW, 5 off
-        spindle_speed : the spindle's speed while on
+        spindle : the output: 3 CW, 4 CCW, 5 when the PWM is off
+        spindle_speed : the speed the output runs at (``sys.spindle_speed``)
         flood, mist : coolant
         pins : the ``Pn`` field, empty for none
+        inches : ``$13=1``: report in inches
         """
         if not mask & 1:
             position = (position[0] - wco[0], position[1] - wco[1], position[2] - wco[2])
-        parts = [state, ("MPos:" if mask & 1 else "WPos:") + axes_text(position)]
+        parts = [state, ("MPos:" if mask & 1 else "WPos:") + axes_text(position, inches=inches)]
         if mask & 2:
             parts.append(f"Bf:{buffers[0]},{buffers[1]}")
-        speed = spindle_speed if spindle != 5 else 0.0
-        parts.append(f"FS:{feed:.0f},{speed:.0f}")
+        rate = f"{feed / _MM_PER_INCH:.1f}" if inches else f"{feed:.0f}"
+        parts.append(f"FS:{rate},{spindle_speed:.0f}")
         if pins:
             parts.append(f"Pn:{pins}")
         if self._wco_counter > 0:
@@ -82,7 +107,7 @@ class StatusReporter:
         else:
             self._wco_counter = 29 if busy else 9
             self._ovr_counter = self._ovr_counter or 1
-            parts.append("WCO:" + axes_text(wco))
+            parts.append("WCO:" + axes_text(wco, inches=inches))
         if self._ovr_counter > 0:
             self._ovr_counter -= 1
         else:

@@ -1,16 +1,26 @@
-"""GRBL 1.1's settings: the defaults, ``$N=value`` with GRBL's checks, and the ``$$`` listing.
+"""GRBL 1.1's EEPROM: the settings (``$N=value``, ``$$``) and the startup lines (``$Nx=line``).
 
 The settings are a plain ``dict[int, float]`` (number to value) that the machine owns; this
-module only knows their defaults, which are integers, and how GRBL checks and prints them.
+module only knows their defaults, which are integers, and how GRBL checks and prints them. The
+two startup lines are plain strings; :func:`startup_line_command` reads the command that
+stores one (the machine validates the line by executing it, as ``system.c`` does).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 
-from sim.grbl_gcode import NUMBER, Refused
+from sim.grbl_words import NUMBER, Refused
 
-__all__ = ["DEFAULT_SETTINGS", "setting_lines", "settings_with", "store_setting"]
+__all__ = [
+    "DEFAULT_SETTINGS",
+    "N_STARTUP_LINES",
+    "setting_lines",
+    "settings_with",
+    "startup_line_command",
+    "startup_listing",
+    "store_setting",
+]
 
 DEFAULT_SETTINGS: dict[int, float] = {
     0: 10, 1: 25, 2: 0, 3: 0, 4: 0, 5: 0, 6: 0, 10: 1, 11: 0.010, 12: 0.002, 13: 0,
@@ -20,6 +30,9 @@ DEFAULT_SETTINGS: dict[int, float] = {
     120: 10.0, 121: 10.0, 122: 10.0, 130: 200.0, 131: 200.0, 132: 200.0,
 }  # fmt: skip
 """GRBL 1.1's default settings (``$$`` of a fresh controller)."""
+
+N_STARTUP_LINES = 2
+"""GRBL's ``N_STARTUP_LINE``: ``$N0`` and ``$N1``."""
 
 _INTEGER_SETTINGS = frozenset({0, 1, 2, 3, 4, 5, 6, 10, 13, 20, 21, 22, 23, 26, 32})
 _ZERO_DECIMAL_SETTINGS = frozenset({30, 31})
@@ -77,6 +90,28 @@ def store_setting(settings: dict[int, float], command: str) -> None:
     settings[key] = amount
     if key == 22 and not amount:
         settings[20] = 0.0  # GRBL clears soft limits with homing
+
+
+def startup_line_command(command: str) -> tuple[int, str]:
+    """Read ``Nx=line`` (a ``$`` line without its ``$``): the index ``x`` and the line.
+
+    Raises
+    ------
+    Refused
+        ``error:2`` without a number after the ``N``, ``error:3`` without the ``=``.
+    """
+    number = NUMBER.match(command, 1)
+    if not number:
+        raise Refused(2)
+    rest = command[number.end() :]
+    if not rest.startswith("="):
+        raise Refused(3)
+    return int(float(number.group())), rest[1:]
+
+
+def startup_listing(lines: list[str]) -> list[str]:
+    """The ``$N`` listing: ``$N0=...``, ``$N1=...``."""
+    return [f"$N{index}={line}" for index, line in enumerate(lines)]
 
 
 def _setting_text(number: int, value: float) -> str:

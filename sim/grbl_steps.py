@@ -10,7 +10,8 @@ pushed messages and, last, the ``ok``/``error:N``.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 __all__ = ["Emit", "LineSteps", "Step"]
 
@@ -38,6 +39,7 @@ class LineSteps:
         self._emit = emit
         self._steps: deque[Step] = deque()
         self._dwell_until: float | None = None
+        self._insert_at: int | None = None
         self.source = ""
 
     @property
@@ -46,8 +48,25 @@ class LineSteps:
         return bool(self._steps)
 
     def add(self, step: Step) -> None:
-        """Queue ``step``."""
-        self._steps.append(step)
+        """Queue ``step`` (right after the running step, inside :meth:`inserting`)."""
+        if self._insert_at is None:
+            self._steps.append(step)
+        else:
+            self._steps.insert(self._insert_at, step)
+            self._insert_at += 1
+
+    @contextmanager
+    def inserting(self) -> Iterator[None]:
+        """Within the block, steps queued by the running step come right after it, in order.
+
+        GRBL runs the startup lines inside ``$H`` before its ``ok``: the homing step queues
+        their steps ahead of the ``ok`` already waiting.
+        """
+        self._insert_at = 1
+        try:
+            yield
+        finally:
+            self._insert_at = None
 
     def respond(self, text: str) -> None:
         """Queue the line's response, ``ok`` or ``error:N``."""
@@ -57,7 +76,7 @@ class LineSteps:
             self._emit(text, "response", source)
             return True
 
-        self._steps.append(step)
+        self.add(step)
 
     def push(self, text: str) -> None:
         """Queue a pushed message (a ``$`` report line, ``[MSG:...]``)."""
@@ -67,7 +86,7 @@ class LineSteps:
             self._emit(text, "push", source)
             return True
 
-        self._steps.append(step)
+        self.add(step)
 
     def do(self, action: Callable[[], None]) -> None:
         """Queue ``action``, run when the steps before it are done."""
@@ -76,7 +95,7 @@ class LineSteps:
             action()
             return True
 
-        self._steps.append(step)
+        self.add(step)
 
     def dwell(self, seconds: float) -> None:
         """Queue a wait of ``seconds`` from when the steps before it are done."""
@@ -89,7 +108,7 @@ class LineSteps:
             self._dwell_until = None
             return True
 
-        self._steps.append(step)
+        self.add(step)
 
     def clear(self) -> None:
         """Drop every step (a refused line, an alarm, a reset)."""

@@ -13,7 +13,7 @@ import dataclasses
 from types import TracebackType
 
 from core.errors import InputError
-from rig.config import RigConfig, simulated_config
+from rig.config import IN_PROCESS_PORT, RigConfig, simulated_config
 from rig.config_cameras import SimulatedCameraConfig
 from rig.devices import LightState
 from rig.hardware import Rig, servo_axis
@@ -37,7 +37,7 @@ def simulated_capture_config(
     """The simulated rig's config for a capture: the scene, image size and axis speeds."""
     if not speed > 0:
         raise InputError(f"the axis speed factor must be positive, got {speed}")
-    base = simulated_config("/dev/null", "/dev/null", scene=scene)
+    base = simulated_config(IN_PROCESS_PORT, IN_PROCESS_PORT, scene=scene)
     axes = {
         role: dataclasses.replace(
             axis,
@@ -67,6 +67,8 @@ class SimulatedRig:
         The rig to emulate (its ports are replaced by the emulators'); default
         :func:`rig.config.simulated_config`.
     servo_faults, gantry_faults : fault injection of the emulators
+    light_start_deg : (azimuth, inclination) where the gantry stands at power-up (default: the
+        park pose); GRBL reports wherever it stands as the configured machine position
     """
 
     def __init__(
@@ -75,8 +77,9 @@ class SimulatedRig:
         *,
         servo_faults: FaultConfig | None = None,
         gantry_faults: GrblFaults | None = None,
+        light_start_deg: tuple[float, float] | None = None,
     ) -> None:
-        base = config or simulated_config("/dev/null", "/dev/null")
+        base = config or simulated_config(IN_PROCESS_PORT, IN_PROCESS_PORT)
         servo_roles = base.axes_of("dynamixel")
         specs = [
             ServoSpec(
@@ -87,11 +90,15 @@ class SimulatedRig:
         ]
         settings = dict(GANTRY_SETTINGS)
         settings[30] = base.light.max_s
-        # The gantry stands at the park pose too (as a real one left there after a session).
+        # The gantry stands at the park pose too (as a real one left there after a session),
+        # unless told where it was left.
         position = [0.0, 0.0, 0.0]
         for role, axis in base.axes_of("grbl").items():
             index = "XYZ".index(str(axis.grbl_axis))
-            position[index] = axis.to_device(base.park.get(role))
+            angle = base.park.get(role)
+            if light_start_deg is not None:
+                angle = light_start_deg[0 if role == "light_azimuth" else 1]
+            position[index] = axis.to_device(angle)
             # The controller accelerates as the config says ($120-$122, units/s^2), so the
             # plan's motion model and the emulated motion agree.
             settings[120 + index] = axis.acceleration_deg_s2 * axis.units_per_deg

@@ -24,6 +24,7 @@ from core.errors import DeviceError
 from rig.config import RigConfig
 from rig.config_cameras import CameraFaultConfig
 from rig.hardware import Rig
+from rig.safety import ForbiddenZone, pose_violation
 from sim.dynamixel_faults import FaultConfig
 from sim.grbl_emulator import GrblFaults
 from sim.simulated_rig import SimulatedRig, simulated_capture_config
@@ -135,9 +136,10 @@ FAULT_CASES = {
         "failed",
         "servo 2",
     ),
-    "gantry alarm mid-move: failed, named": (
+    # A fault a reset clears pauses the run (a suspender), for a resume once it is fixed.
+    "gantry alarm mid-move: paused, named": (
         {"gantry_faults": GrblFaults(hard_limit_after_moves=3)},
-        "failed",
+        "paused",
         "ALARM:1",
     ),
 }
@@ -157,6 +159,41 @@ def test_device_faults_are_retried_or_stop_cleanly(tmp_path: Path, case: str) ->
     assert result.exit_status == status and words in result.reason
     stop = read_journal(tmp_path / "d" / "journal.jsonl").documents[-1]
     assert stop["type"] == "stop" and stop["exit_status"] == status and words in stop["reason"]
+
+
+def test_a_fault_the_operator_fixes_is_cleared_and_the_run_goes_on(
+    tmp_path: Path, reference: dict[str, str]
+) -> None:
+    told: list[str] = []
+
+    def operator(reason: str) -> bool:
+        told.append(reason)
+        return True  # "fixed it": the session unlocks the gantry and takes the image again
+
+    with _session(
+        tmp_path, _config(), _plan(), gantry_faults=GrblFaults(hard_limit_after_moves=3)
+    ) as (
+        session,
+        simulated,
+        _,
+    ):
+        session.on_fault = operator
+        result = session.run()
+        assert not simulated.gantry.light.on
+    assert result.exit_status == "success", result.reason
+    assert len(told) == 1 and "ALARM:1" in told[0]
+    assert _digests(tmp_path / "d") == reference
+
+
+def test_a_paused_fault_resumes_to_the_same_dataset(
+    tmp_path: Path, reference: dict[str, str]
+) -> None:
+    faults = GrblFaults(hard_limit_after_moves=3)
+    with _session(tmp_path, _config(), _plan(), gantry_faults=faults) as (session, _, _):
+        assert session.run().exit_status == "paused"
+    with _session(tmp_path, _config(), _plan()) as (session, _, _):
+        assert session.run().exit_status == "success"
+    assert _digests(tmp_path / "d") == reference
 
 
 def _last_result(path: Path) -> SessionResult:
@@ -247,3 +284,69 @@ def test_resume_removes_what_a_kill_mid_write_left(
         assert session.run().exit_status == "success"
     assert not stray.exists()
     assert _digests(tmp_path / "d") == reference
+
+
+def test_a_capture_from_an_unsafe_start_parks_first(tmp_path: Path) -> None:
+    # The light was left at the camera (0 deg apart): the first move of the plan would start
+    # unsafe; the executor leaves it by the park route, then captures as usual.
+    config = _config()
+    dataset = Dataset.create(
+        tmp_path / "d", rig_config=config.to_dict(), plan=_plan().to_dict(),
+        planned=_plan().planned_keys(config),
+    )  # fmt: skip
+    with SimulatedRig(config, light_start_deg=(0.0, 5.0)) as simulated, simulated.rig() as rig:
+        assert pose_violation(config, rig.pose()) is not None
+        result = CaptureSession(rig, dataset, _plan(), progress=False).run()
+    assert result.exit_status == "success", result.reason
+    assert Dataset.open(tmp_path / "d").verify().complete
+
+
+def test_a_capture_from_an_unsafe_start_without_a_way_out_says_what_to_do(
+    tmp_path: Path,
+) -> None:
+    # The light starts too close to the camera, and a forbidden band lies between it and the
+    # park pose: every route out crosses the band.
+    config = _config()
+    box = ForbiddenZone("band", light_inclination_deg=(20.0, 30.0))
+    config = dataclasses.replace(
+        config, safety=dataclasses.replace(config.safety, forbidden=(box,))
+    )
+    dataset = Dataset.create(
+        tmp_path / "d", rig_config=config.to_dict(), plan=_plan().to_dict(),
+        planned=_plan().planned_keys(config),
+    )  # fmt: skip
+    with SimulatedRig(config, light_start_deg=(0.0, 5.0)) as simulated, simulated.rig() as rig:
+        result = CaptureSession(rig, dataset, _plan(), progress=False).run()
+        moves = sum("G1" in line for line in simulated.gantry.lines)
+    assert result.exit_status == "failed"
+    assert "which is unsafe" in result.reason and "by hand" in result.reason
+    assert moves == 0
+
+
+def test_a_second_capture_of_a_running_dataset_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A slow capture runs in a child; a resume of the same dataset must not start beside it
+    # (it would drive the same ports and interleave its run in the journal).
+    path = tmp_path / "busy"
+    slow = [*SIM[:-2], "1", "--quiet"]  # real-time axes: the child takes seconds
+    child = subprocess.Popen(
+        [sys.executable, "-m", "app.cli", "capture", *slow, "-o", str(path)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        journal = path / "journal.jsonl"
+        deadline = time.monotonic() + 120
+        while not (journal.exists() and b'"type":"start"' in journal.read_bytes()):
+            assert time.monotonic() < deadline and child.poll() is None
+            time.sleep(0.01)
+        assert main(["capture", "--resume", str(path), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert f"in use by process {child.pid}" in err and "one capture at a time" in err
+    finally:
+        child.kill()
+        child.wait()
+    # The holder is gone (killed): its lock went with it, and the resume completes the run.
+    assert main(["capture", "--resume", str(path), "--quiet"]) == 0
+    assert Dataset.open(path).verify().complete

@@ -46,6 +46,12 @@ class FakeRig:
     def park(self) -> RigPose | None:
         return None
 
+    def pose(self) -> RigPose:
+        return self.config.park
+
+    def clear_faults(self) -> str:
+        return ""
+
     def stop(self) -> None: ...
 
 

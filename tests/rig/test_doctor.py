@@ -127,7 +127,7 @@ def test_an_overloaded_servo_is_named_in_the_report() -> None:
         assert not simulated.gantry.light.on
 
 
-def test_an_axis_at_its_limit_is_nudged_inward_and_one_without_room_skipped() -> None:
+def test_an_axis_at_its_limit_is_nudged_inward_and_one_without_room_fails_unchecked() -> None:
     base = simulated_config("/dev/null", "/dev/null")
     axes = dict(base.axes)
     axes["light_inclination"] = dataclasses.replace(
@@ -138,8 +138,9 @@ def test_an_axis_at_its_limit_is_nudged_inward_and_one_without_room_skipped() ->
         rows = _by_device(run_doctor(simulated.rig(), exposure_ms=float("nan")))
         match = NUDGE.fullmatch(rows[_axis("camera_inclination")].detail)
         assert match is not None and float(match.group(1)) == pytest.approx(-2.0, abs=0.1)
-        skipped = rows[_axis("light_inclination")]
-        assert skipped.ok and skipped.detail == "skipped: no safe direction to move"
+        # An axis the doctor could not move has not been checked: a failure, not a pass.
+        unchecked = rows[_axis("light_inclination")]
+        assert not unchecked.ok and unchecked.detail.startswith("not checked: no safe direction")
         # A NaN exposure is refused in words, on the camera's row.
         camera = rows["camera (simulated)"]
         assert not camera.ok and camera.detail == "exposure_ms must be a positive number, got nan"

@@ -304,9 +304,12 @@ FAULT_CASES = [
         DeviceError,
         r"servo [12] .*Incorrect status packet",
     ),
+    # Every reply late by more than the first wait allows (a loaded machine): each retry waits
+    # twice as long, so the replies are taken.
+    FaultCase("every-reply-late", FaultConfig(delay_s=0.06, delay_probability=1.0)),
     FaultCase(
-        "every-reply-late",
-        FaultConfig(delay_s=0.06, delay_probability=1.0),
+        "every-reply-later-than-every-wait",
+        FaultConfig(delay_s=0.4, delay_probability=1.0),
         DeviceError,
         r"servo [12] .*failed after 4 attempts",
     ),

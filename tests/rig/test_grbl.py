@@ -223,7 +223,7 @@ def test_forbidden_commands_are_refused_before_writing(
     emulator, gantry = shared
     before = emulator.received
     with pytest.raises(InputError, match=problem):
-        gantry._command(command, retry=False)
+        gantry._command(command)
     time.sleep(0.01)
     assert emulator.received == before
 
@@ -259,7 +259,7 @@ def test_moves_arrive_with_the_motion_models_timing() -> None:
         rate = min(30000.0, 36000.0 / u[0], 36000.0 / u[1]) / 60.0
         expected = Profile.plan(length, 0.0, rate, accel).duration
         assert expected <= elapsed < expected + 2.0  # generous: CI machines are loaded
-        assert any(line.startswith("G90G53G1X90.000Y45.000F") for line in emulator.lines)
+        assert any(line.startswith("G21G90G53G1X90.000Y45.000F") for line in emulator.lines)
 
 
 def test_axis_mapping_offset_direction_and_scale() -> None:
@@ -275,7 +275,7 @@ def test_axis_mapping_offset_direction_and_scale() -> None:
 
 def test_work_position_reports_are_converted_with_wco() -> None:
     with rig(settings={10: 0}) as (emulator, gantry):
-        gantry._command("G92 X5 Y-5", retry=False)  # a stray work offset on the controller
+        gantry._command("G92 X5 Y-5")  # a stray work offset on the controller
         gantry.move_to_deg(20.0, 30.0)
         assert gantry.status().wpos is not None
         assert emulator.position_deg() == pytest.approx((20.0, 30.0))
@@ -352,7 +352,7 @@ def test_homing_disabled_is_refused_before_sending() -> None:
             gantry.home()
         assert "$H" not in emulator.lines
         with pytest.raises(GrblCommandError, match="error:5"):
-            gantry._command("$H", retry=False)  # GRBL itself refuses too
+            gantry._command("$H")  # GRBL itself refuses too
 
 
 def test_settings_round_trip() -> None:
@@ -423,27 +423,31 @@ def test_context_manager_stops_a_move_and_keeps_the_position() -> None:
 # -- faults -------------------------------------------------------------------------------------
 
 
-def test_lost_reply_to_settings_is_retried() -> None:
+def test_a_lost_reply_is_never_resent_the_gantry_stops_instead() -> None:
+    # The line ran, its ok was lost: sending it again could run it twice, and its late ok would
+    # be taken for the next line's. The driver stops the gantry and says so.
     faults = GrblFaults(drop_reply=FaultRule(pattern=r"^\$\$$", limit=1))
-    with rig(faults=faults, timeout_s=0.1) as (emulator, gantry):
-        assert emulator.lines.count("$$") == 2
-        assert gantry.settings()[111] == 36000.0
+    with GrblEmulator(settings=FAST, faults=faults) as emulator:
+        gantry = GrblGantry(emulator.port, 115200, AXES, timeout_s=0.1)
+        with pytest.raises(GrblTimeoutError, match=r"outcome is unknown.*stopped") as lost:
+            gantry.connect()
+        assert lost.value.command == "$$" and emulator.port in str(lost.value)
+        assert emulator.lines.count("$$") == 1
+        assert not gantry.link.is_open
 
 
-def test_lost_reply_to_a_move_is_confirmed_not_resent() -> None:
+def test_a_move_whose_reply_is_lost_is_stopped_not_resent() -> None:
     faults = GrblFaults(drop_reply=FaultRule(pattern="G1", limit=1))
-    with rig(faults=faults, feed_deg_min=6000.0, timeout_s=0.1) as (emulator, gantry):
-        gantry.move_to_deg(45.0, 10.0)
-        assert emulator.position_deg() == pytest.approx((45.0, 10.0))
+    with rig(faults=faults, feed_deg_min=600.0, timeout_s=0.1) as (emulator, gantry):
+        with pytest.raises(GrblTimeoutError, match="outcome is unknown"):
+            gantry.move_to_deg(45.0, 10.0)
         assert sum("G1" in line for line in emulator.lines) == 1
-
-
-def test_lost_reply_to_a_short_move_is_resent_safely() -> None:
-    # The move is over before the driver asks, so it sees the target reached and goes on.
-    faults = GrblFaults(drop_reply=FaultRule(pattern="G1", limit=2))
-    with rig(faults=faults, timeout_s=0.1) as (emulator, gantry):
-        gantry.move_to_deg(1.0, 1.0)
-        assert emulator.position_deg() == pytest.approx((1.0, 1.0))
+        status = gantry.status()
+        assert status.state == "Idle"  # feed hold, then a reset at Hold:0: no alarm
+        azimuth, _ = gantry.position_deg()
+        assert 0.0 <= azimuth < 45.0  # stopped on the way, position kept
+        gantry.move_to_deg(45.0, 10.0)  # the gantry is ready again: a new, known move
+        assert emulator.position_deg() == pytest.approx((45.0, 10.0))
 
 
 def test_all_replies_lost_is_a_clean_error_naming_port_and_command() -> None:
@@ -452,7 +456,7 @@ def test_all_replies_lost_is_a_clean_error_naming_port_and_command() -> None:
         gantry = GrblGantry(emulator.port, 115200, AXES, timeout_s=0.1, retries=1)
         with pytest.raises(GrblTimeoutError, match=rf"{emulator.port}.*'\$\$'"):
             gantry.connect()
-        assert gantry._serial is None
+        assert not gantry.link.is_open
 
 
 def test_lost_status_reports_are_retried() -> None:
@@ -476,6 +480,9 @@ def test_reply_later_than_the_timeout_is_a_clean_error() -> None:
     with rig(faults=faults, timeout_s=0.1, retries=0) as (emulator, gantry):
         with pytest.raises(GrblTimeoutError, match=rf"{emulator.port}.*'M3 S500.000'"):
             gantry.light_on(0.5)
+        assert sum(line.startswith("M3") for line in emulator.lines) == 1
+        gantry.light_off()  # the late ok was not taken for this line's: the reset dropped it
+        assert not emulator.light.on
 
 
 def test_line_noise_is_skipped() -> None:
@@ -489,7 +496,7 @@ def test_line_noise_is_skipped() -> None:
 
 def test_endless_noise_is_a_protocol_error() -> None:
     with rig() as (emulator, gantry):
-        gantry._rx += b"\xff\xfe noise\r\n" * 60
+        gantry.link._rx += b"\xff\xfe noise\r\n" * 60
         with pytest.raises(ProtocolError, match=emulator.port):
             gantry.status()
 
@@ -535,3 +542,108 @@ def test_full_cycle_connect_home_move_light_alarm_unlock() -> None:
         gantry.light_on(1.0)
         gantry.light_off()
         assert not emulator.light.on
+
+
+# -- the controller as the firmware really behaves ------------------------------------------
+
+
+def test_a_startup_line_in_inches_cannot_turn_millimetres_into_inches() -> None:
+    # `$N0=G20` runs after every reset: without pinning, X3 would be 3 inches (76.2 mm).
+    with GrblEmulator(settings=FAST, startup_lines=["G20"]) as emulator:
+        with GrblGantry(emulator.port, 115200, AXES, feed_deg_min=30000.0) as gantry:
+            assert gantry.startup_lines == {0: "G20", 1: ""}
+            assert {"G21", "G90", "G94"} <= gantry.modal_state()
+            gantry.move_to_deg(3.0, 3.0)
+            assert emulator.position_deg() == pytest.approx((3.0, 3.0))
+            gantry.safe_stop()  # a reset: the startup line runs again, and is pinned again
+            gantry.move_to_deg(6.0, 4.0)
+            assert emulator.position_deg() == pytest.approx((6.0, 4.0))
+
+
+def test_reports_in_inches_are_converted() -> None:
+    with rig(settings={13: 1}) as (emulator, gantry):
+        gantry.move_to_deg(10.0, 5.0)  # the arrival check reads the report: in inches here
+        assert emulator.position_deg() == pytest.approx((10.0, 5.0))
+        assert gantry.position_deg() == pytest.approx((10.0, 5.0), abs=3e-3)  # 0.0001 inch
+
+
+def test_a_critical_alarm_is_reset_only_after_reset_to_continue() -> None:
+    # GRBL discards a reset sent before it says "Reset to continue": a driver that resets at
+    # once is never answered again.
+    with GrblEmulator(
+        settings=FAST, faults=GrblFaults(hard_limit_after_moves=1), critical_message_delay_s=0.8
+    ) as emulator:
+        with GrblGantry(emulator.port, 115200, AXES, feed_deg_min=600.0) as gantry:
+            with pytest.raises(GrblAlarmError, match="ALARM:1") as alarm:
+                gantry.move_to_deg(20.0, 0.0)
+            assert "Reset to continue" not in str(alarm.value)  # it came: nothing to add
+            assert gantry.status().state == "Alarm"  # the controller answers again
+            gantry.unlock()
+            gantry.move_to_deg(5.0, 0.0)
+            assert emulator.position_deg() == pytest.approx((5.0, 0.0))
+
+
+@pytest.mark.parametrize("code", [8, 9])
+def test_a_failed_homing_is_one_alarm_not_an_unexpected_reset(code: int) -> None:
+    settings = {22: 1, 24: 6000.0, 25: 30000.0, 27: 2.0}
+    with rig(settings=settings, faults=GrblFaults(homing_fails=code)) as (_, gantry):
+        with pytest.raises(GrblAlarmError, match=f"ALARM:{code}") as alarm:
+            gantry.home()
+        assert "reset unexpectedly" not in str(alarm.value)
+        assert gantry.status().state == "Alarm"  # locked, and talking
+
+
+def test_rates_and_accelerations_are_written_when_they_differ() -> None:
+    axes = GantryAxes(
+        GantryAxisConfig("X", -180.0, 180.0, max_rate_deg_min=6000.0, acceleration_deg_s2=360.0),
+        GantryAxisConfig(
+            "Y", 0.0, 90.0, units_per_deg=2.0, max_rate_deg_min=3000.0, acceleration_deg_s2=90.0
+        ),
+    )
+    with GrblEmulator() as emulator:  # the firmware's defaults: 500 mm/min, 10 mm/s^2
+        with GrblGantry(emulator.port, 115200, axes, feed_deg_min=3000.0):
+            pass
+        held = emulator.settings
+        assert (held[110], held[120], held[111], held[121]) == (6000.0, 360.0, 6000.0, 180.0)
+        writes = sum(line.startswith("$11") or line.startswith("$12") for line in emulator.lines)
+        assert writes == 4
+        with GrblGantry(emulator.port, 115200, axes, feed_deg_min=3000.0) as gantry:
+            gantry.move_to_deg(30.0, 10.0)
+        # Already right: nothing written the second time (EEPROM writes wear the memory).
+        again = sum(line.startswith("$11") or line.startswith("$12") for line in emulator.lines)
+        assert again == writes
+
+
+def test_laser_mode_is_refused_before_anything_moves() -> None:
+    with GrblEmulator(settings={**FAST, 32: 1}) as emulator:
+        with pytest.raises(DeviceError, match=r"laser mode \(\$32=1\).*\$32=0"):
+            GrblGantry(emulator.port, 115200, AXES).connect()
+        assert not any("G1" in line for line in emulator.lines)
+
+
+def test_a_startup_line_that_moves_is_refused() -> None:
+    with GrblEmulator(settings=FAST, startup_lines=["G0 X10"]) as emulator:
+        with pytest.raises(DeviceError, match=r"\$N0=G0 ?X10.*names an axis"):
+            GrblGantry(emulator.port, 115200, AXES).connect()
+
+
+def test_a_light_switch_behind_a_move_waits_for_it_and_replies_stay_in_step() -> None:
+    # M3 is answered only once the planner is empty: the driver waits for the motion instead of
+    # timing out, re-sending, and taking the late oks for the next line's.
+    with rig(feed_deg_min=3000.0, timeout_s=0.2) as (emulator, gantry):
+        gantry.move_to_deg(60.0, 0.0, wait=False)  # about 1.2 s of motion
+        gantry.light_on(0.5)
+        assert emulator.light.on and emulator.position_deg() == pytest.approx((60.0, 0.0))
+        gantry.move_to_deg(5.0, 5.0)
+        assert emulator.position_deg() == pytest.approx((5.0, 5.0))
+        assert sum(line.startswith("M3") for line in emulator.lines) == 1
+
+
+def test_status_is_polled_at_most_five_times_a_second_during_motion() -> None:
+    with rig(feed_deg_min=3000.0) as (emulator, gantry):
+        before = emulator.received.count(b"?")
+        start = time.monotonic()
+        gantry.move_to_deg(90.0, 0.0)  # about 1.8 s
+        elapsed = time.monotonic() - start
+        polls = emulator.received.count(b"?") - before
+        assert elapsed > 1.5 and polls <= 5 * elapsed + 4

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Iterator
 
 import numpy as np
@@ -8,10 +9,10 @@ import pytest
 
 from core.errors import DeviceError, SafetyError
 from rig.config import simulated_config
-from rig.hardware import servo_axis
+from rig.hardware import LightGantry, servo_axis
 from rig.pose import RigPose
 from sim.dynamixel_faults import FaultConfig
-from sim.grbl_emulator import GrblFaults
+from sim.grbl_emulator import GrblEmulator, GrblFaults
 from sim.simulated_rig import SimulatedRig
 
 
@@ -105,3 +106,19 @@ def test_config_offsets_map_to_the_drivers_convention() -> None:
             2048 + driver.direction * driver.gear_ratio * (rig_deg - driver.offset_deg) / 360 * 4096
         )
         assert ticks == pytest.approx(device / 360 * 4096)
+
+
+@pytest.mark.parametrize(("homing", "needs"), [(1, "homing"), (0, "an unlock")])
+def test_a_controller_locked_in_alarm_says_what_it_needs(homing: int, needs: str) -> None:
+    # GRBL with homing enabled powers up locked; without homing in the config nothing may move,
+    # and the first G-code would only come back as "error:9".
+    with GrblEmulator(settings={22: homing}) as emulator:
+        if not homing:
+            emulator.inject_alarm(2)
+            time.sleep(0.8)
+        config = simulated_config("/dev/null", emulator.port)
+        gantry = LightGantry(config)
+        with pytest.raises(DeviceError, match=rf"locked in alarm and needs {needs}.*gantry\."):
+            gantry.connect()
+        gantry.close()
+        assert not any(line.startswith("M5") for line in emulator.lines)

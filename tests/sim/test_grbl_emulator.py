@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 import pytest
 import serial
@@ -23,7 +25,8 @@ class Line:
     """A raw serial line to the emulator, with helpers that wait for replies."""
 
     def __init__(self, port: str) -> None:
-        self.serial = serial.Serial(port, 115200, timeout=0.5)
+        # Longer than GRBL's 500 ms pause after an ALARM line, so a read spans it.
+        self.serial = serial.Serial(port, 115200, timeout=1.5)
 
     def send(self, data: bytes) -> None:
         self.serial.write(data)
@@ -47,12 +50,22 @@ class Line:
         time.sleep(seconds)
         return self.serial.read(self.serial.in_waiting)
 
+    def idle(self, timeout: float = 5.0) -> str:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            report = self.status()
+            if report.startswith("<Idle"):
+                return report
+            time.sleep(0.01)
+        raise AssertionError(f"not idle after {timeout} s: {report}")
+
 
 @contextmanager
 def grbl(
-    settings: dict[int, float] | None = None, faults: GrblFaults | None = None
+    settings: dict[int, float] | None = None, faults: GrblFaults | None = None, **options: Any
 ) -> Iterator[tuple[GrblEmulator, Line]]:
-    with GrblEmulator(settings={**FAST, **(settings or {})}, faults=faults) as emulator:
+    merged = {**FAST, **(settings or {})}
+    with GrblEmulator(settings=merged, faults=faults, **options) as emulator:
         line = Line(emulator.port)
         try:
             yield emulator, line
@@ -92,7 +105,7 @@ ERRORS = [
     ("X", "error:2"),
     ("1", "error:1"),
     ("G5", "error:20"),
-    ("G2 X1 I1", "error:20"),
+    ("G2 X1 I1", "error:22"),  # an arc needs a feed rate (GRBL 1.1 has arcs)
     ("Q1", "error:20"),
     ("G0 G1 X1", "error:21"),
     ("M3 M5", "error:21"),
@@ -340,3 +353,255 @@ def test_hard_limit_fault_after_moves() -> None:
         line.send(b"G0 X-10\nG0 X-30\n")
         assert line.lines(4) == ["ok", "ok", "ALARM:1", "[MSG:Reset to continue]"]
         assert -30.0 < emulator.machine_position()[0] < -10.0
+
+
+# -- GRBL 1.1h behaviours beyond the basics ---------------------------------------------------
+
+BANNER_TEXT = BANNER.decode().rstrip("\r\n")
+LOCKED_TEXT = LOCKED.decode().rstrip("\r\n")
+
+
+def test_startup_lines_are_validated_stored_and_run_after_every_reset() -> None:
+    with grbl() as (emulator, line):
+        assert line.ask("$N0=G20") == "ok"
+        assert line.ask("$N1=G5") == "error:20"  # executed to check it: refused, not stored
+        line.send(b"$N\n")
+        assert line.lines(3) == ["$N0=G20", "$N1=", "ok"]
+        line.send(b"\x18")
+        assert line.lines(2) == [BANNER_TEXT, ">G20:ok"]
+        assert line.ask("G91 G0 X3 Y3") == "ok"  # inches, from the startup line
+        line.idle()
+        assert emulator.machine_position() == pytest.approx((76.2, 76.2, 0.0))
+        # A line valid when stored (F was set) can fail at startup: echoed with its error.
+        assert line.ask("G21 G1 F100") == "ok"
+        assert line.ask("$N1=G1X1") == "ok"
+        line.idle()
+        line.send(b"\x18")
+        assert line.lines(3) == [BANNER_TEXT, ">G20:ok", ">G1X1:error:22"]
+        assert emulator.startup_lines == ["G20", "G1X1"]
+        line.send(b"$G\n")
+        assert line.lines(2)[0].startswith("[GC:G0 G54 G17 G20 G90")  # the G1 was refused
+
+
+def test_startup_lines_are_stored_only_when_idle_and_skipped_in_alarm() -> None:
+    with grbl({22: 1, 24: 6000.0, 25: 30000.0}, startup_lines=["G20"]) as (emulator, line):
+        assert emulator.state == "Alarm"  # no startup lines in Alarm
+        assert line.ask("$N1=G91") == "error:8"
+        line.send(b"$G\n")
+        assert "G21" in line.lines(2)[0]
+        line.send(b"$H\n")  # a homing that succeeds runs them before its ok
+        assert line.lines(2) == [">G20:ok", "ok"]
+
+
+def test_inch_reports_with_13_equal_1() -> None:
+    with grbl({10: 1, 110: 6000.0}) as (_, line):
+        assert line.ask("G0 X-25.4 Y-50.8") == "ok"
+        line.idle()
+        assert line.ask("$13=1") == "ok"
+        assert line.ask("G92 X0") == "ok"
+        report = line.status()
+        assert report.startswith("<Idle|MPos:-1.0000,-2.0000,0.0000|FS:0.0,0")
+        assert "|WCO:-1.0000,0.0000,0.0000" in report
+        line.send(b"$G\n")
+        modes = line.lines(2)[0]
+        assert modes.startswith("[GC:G0 G54 G17 G21 G90") and "F0.0" in modes  # inch/min
+        line.send(b"$#\n")
+        parameters = line.lines(12)
+        assert "[G92:-1.0000,0.0000,0.0000]" in parameters and "[TLO:0.0000]" in parameters
+        assert line.ask("G1 Y-101.6 F1270") == "ok"  # 50 inch/min
+        time.sleep(0.5)
+        assert "|FS:50.0,0" in line.status()
+
+
+def test_position_at_power_up_and_in_steps() -> None:
+    with grbl(position=(-5.0, 0.0, 0.0)) as (emulator, line):
+        assert line.status().startswith("<Idle|MPos:-5.000,0.000,0.000")
+        assert line.ask("G91 G0 X1") == "ok"  # the parser starts where the machine is
+        line.idle()
+        assert emulator.machine_position() == pytest.approx((-4.0, 0.0, 0.0))
+    with grbl() as (emulator, line):
+        assert line.status().startswith("<Idle|MPos:0.000,0.000,0.000")
+        line.ask("G0 X-10 Y-10")
+        line.idle()
+        assert line.ask("$100=500") == "ok"  # twice the steps per mm: the steps stay
+        assert line.status().startswith("<Idle|MPos:-5.000,-10.000,0.000")
+        assert emulator.machine_position() == pytest.approx((-5.0, -10.0, 0.0))
+        line.ask("G90 G0 X-10")  # the parser still thinks -10: GRBL moves by its own steps
+        line.idle()
+        assert emulator.machine_position()[0] == pytest.approx(-10.0)
+
+
+def test_reset_to_continue_comes_after_a_pause_and_an_early_reset_is_discarded() -> None:
+    with grbl() as (emulator, line):
+        emulator.inject_alarm(1)
+        alarmed = time.monotonic()
+        assert line.lines(1) == ["ALARM:1"]
+        line.send(b"\x18?")  # during GRBL's pause: the reset is dropped, nothing answered
+        assert line.lines(1) == ["[MSG:Reset to continue]"]
+        assert time.monotonic() - alarmed >= 0.45
+        assert line.quiet(0.1) == b""
+        assert emulator.state == "Alarm"
+        line.send(b"\x18")
+        assert line.quiet(0.1) == BANNER + LOCKED
+    with grbl(critical_message_delay_s=0.1) as (emulator, line):
+        emulator.inject_alarm(2)
+        alarmed = time.monotonic()
+        assert line.lines(2) == ["ALARM:2", "[MSG:Reset to continue]"]
+        assert 0.08 <= time.monotonic() - alarmed < 0.45
+
+
+@pytest.mark.parametrize("code", [8, 9])
+def test_a_failed_homing_alarms_then_resets_itself(code: int) -> None:
+    settings = {22: 1, 24: 6000.0, 25: 30000.0, 27: 2.0, 130: 20.0, 131: 20.0, 132: 20.0}
+    with grbl(settings, GrblFaults(homing_fails=code)) as (emulator, line):
+        line.send(b"$H\n")
+        assert line.lines(1) == [f"ALARM:{code}"]
+        line.send(b"\x18?")  # absorbed: GRBL is resetting already
+        assert line.quiet(0.2) == b""
+        assert line.lines(3) == ["ok", BANNER_TEXT, LOCKED_TEXT]
+        assert line.quiet(0.1) == b""
+        assert emulator.state == "Alarm"
+        assert line.ask("G0 X-1") == "error:9"
+
+
+def test_limit_switches_show_in_pn_and_every_edge_is_a_hard_limit() -> None:
+    with grbl() as (emulator, line):
+        emulator.press_limit("x")  # hard limits off ($21=0): only the pin shows
+        assert "|Pn:X" in line.status() and emulator.state == "Idle"
+        emulator.release_limit("X")
+        assert "Pn:" not in line.status()
+    with grbl({21: 1}) as (emulator, line):
+        emulator.press_limit("Y")
+        assert line.lines(2) == ["ALARM:1", "[MSG:Reset to continue]"]
+        line.send(b"\x18")  # still pressed: GRBL checks the limits after the banner
+        assert line.lines(3) == [BANNER_TEXT, "[MSG:Check Limits]", LOCKED_TEXT]
+        assert line.status().startswith("<Alarm|") and "|Pn:Y" in line.status()
+        line.ask("$X")
+        line.lines(1)
+        emulator.release_limit("Y")  # the release is an edge too
+        assert line.lines(2) == ["ALARM:1", "[MSG:Reset to continue]"]
+        line.send(b"\x18")
+        assert line.lines(2) == [BANNER_TEXT, LOCKED_TEXT]
+        assert "Pn:" not in line.status()
+
+
+def test_laser_mode_lights_only_with_motion() -> None:
+    # 10 units/s at 40 units/s^2: a 5-unit move accelerates for 0.25 s, cruises, decelerates.
+    with grbl({32: 1, 110: 600.0, 120: 40.0}) as (emulator, line):
+        assert line.ask("M3 S500") == "ok"  # G0 mode: no power
+        assert emulator.light == LightState(False, 0.0, "off")
+        reports = [line.status() for _ in range(3)]
+        assert all("|FS:0,0" in r for r in reports) and not any("|A:" in r for r in reports)
+        line.send(b"$G\n")
+        assert " M3 " in line.lines(2)[0]  # the modal state is M3 S500
+        assert line.ask("G1 X-5 F600") == "ok"
+        time.sleep(0.4)
+        assert emulator.state == "Run" and emulator.light == LightState(True, 0.5, "spindle")
+        assert "|FS:600,500" in line.status()
+        line.idle()
+        assert emulator.light.on  # M3 is constant power: it stays on when the motion stops
+        assert line.ask("G0 X0") == "ok"
+        time.sleep(0.2)
+        assert emulator.state == "Run" and not emulator.light.on  # rapids are never powered
+        line.idle()
+        assert line.ask("M4") == "ok"  # dynamic power: dark at rest
+        assert not emulator.light.on
+        assert line.ask("G1 X-5") == "ok"
+        time.sleep(0.1)
+        accelerating = emulator.light
+        time.sleep(0.3)
+        cruising = emulator.light
+        assert 0.0 < accelerating.intensity < 0.4 and cruising.intensity == pytest.approx(0.5)
+        assert any("|A:C" in line.status() for _ in range(2))
+        line.idle()
+        assert not emulator.light.on  # M4 goes dark when motion ends
+        assert line.ask("G1 X0") == "ok"
+        time.sleep(0.2)
+        line.send(b"!")
+        time.sleep(0.4)
+        assert line.status().startswith("<Hold:0") and not emulator.light.on
+        line.send(b"~")
+        assert line.lines(1) == ["[MSG:Restoring spindle]"]
+        time.sleep(0.1)
+        assert emulator.light.on
+    with grbl() as (emulator, line):
+        assert line.ask("M3 S500") == "ok"  # $32=0: the spindle runs at once
+        assert emulator.light == LightState(True, 0.5, "spindle")
+
+
+def test_arcs_follow_the_circle() -> None:
+    with grbl({10: 3}) as (emulator, line):
+        line.send(b"G17 G2 X-20 Y0 I-10 J0 F3000\n")  # 78 segments: more than the planner holds
+        samples = []
+        deadline = time.monotonic() + 10
+        while emulator.state == "Idle" and time.monotonic() < deadline:
+            time.sleep(0.001)
+        while emulator.state != "Idle" and time.monotonic() < deadline:
+            samples.append(emulator.machine_position())
+            time.sleep(0.005)
+        assert line.lines(1) == ["ok"]
+        assert emulator.machine_position() == pytest.approx((-20.0, 0.0, 0.0))
+        assert len(samples) > 20
+        radii = [math.hypot(x + 10.0, y) for x, y, _ in samples]
+        assert all(abs(r - 10.0) < 0.01 for r in radii)  # chords within $12 of the circle
+        assert min(y for _, y, _ in samples) == pytest.approx(-10.0, abs=0.05)  # clockwise
+        assert line.ask("G3 X0 Y0 R10") == "ok"  # radius format, back along the other half
+        line.idle()
+        assert emulator.machine_position() == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+        assert line.ask("G91 G2 X0 I5") == "ok"  # a full circle back to the start
+        line.idle()
+        assert emulator.machine_position() == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+
+
+ARC_ERRORS = [
+    ("G90 G2 I1", "error:26"),  # no axis words
+    ("G2 Z-1 I1", "error:32"),  # none in the plane
+    ("G2 X-1", "error:35"),  # no offsets in the plane (and no R)
+    ("G2 X-5 I1", "error:33"),  # the radii to start and target differ
+    ("G91 G2 X0 Y0 R5", "error:33"),  # R mode: the target is the start
+    ("G2 X-50 R10", "error:34"),  # the radius is shorter than half the chord
+    ("G2 X-3 R2 I1", "error:36"),  # I unused with R
+    ("G53 G2 X-1 I1", "error:30"),
+    ("G1 X-1 R1", "error:36"),
+]
+
+
+@pytest.mark.parametrize(("command", "reply"), ARC_ERRORS)
+def test_arc_errors(shared: Line, command: str, reply: str) -> None:
+    assert shared.ask("G90 G1 F100") == "ok"
+    assert shared.ask(command) == reply
+
+
+def test_sleep_until_a_reset_wakes_it_locked() -> None:
+    with grbl() as (emulator, line):
+        assert line.ask("M3 S500") == "ok" and line.ask("M8") == "ok"
+        line.send(b"$SLP\n")
+        assert line.lines(2) == ["ok", "[MSG:Sleeping]"]
+        assert emulator.light == LightState(False, 0.0, "off")
+        assert line.status().startswith("<Sleep|")
+        line.send(b"G0 X-1\n!~$X\n")  # nothing but a reset is acted on
+        assert line.quiet(0.2) == b""
+        assert line.status().startswith("<Sleep|") and emulator.lines[-1] == "$SLP"
+        line.send(b"\x18")
+        assert line.quiet(0.1) == BANNER + LOCKED  # as after an alarm: the position is lost
+        assert emulator.state == "Alarm" and emulator.machine_position() == (0.0, 0.0, 0.0)
+        assert line.ask("G0 X-1") == "error:9"
+
+
+def test_spindle_and_coolant_changes_wait_for_the_planner() -> None:
+    with grbl({110: 600.0}) as (emulator, line):
+        assert line.ask("G1 X-5 F600") == "ok"  # about half a second
+        started = time.monotonic()
+        line.serial.timeout = 0.1
+        line.send(b"M8\n")
+        assert line.serial.readline() == b""  # a host that gives up early...
+        assert emulator.state == "Run" and not emulator.light.on
+        line.serial.timeout = 1.5
+        assert line.lines(1) == ["ok"]  # ...sees the ok late, once the motion is done
+        assert time.monotonic() - started >= 0.4
+        assert emulator.state == "Idle" and emulator.light == LightState(True, 1.0, "coolant")
+        assert line.ask("G1 X0") == "ok"
+        assert line.ask("M8") == "ok"  # no change: GRBL does not wait
+        assert emulator.state == "Run"
+        assert line.ask("M3 S100") == "ok"  # a change waits again
+        assert emulator.state == "Idle" and emulator.light.intensity == pytest.approx(0.1)
