@@ -395,6 +395,11 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     field.add_argument("--points", type=int, default=100_000, help="surface points (default 100k)")
     _add_camera_options(field)
     field.add_argument("--dtype", choices=("float32", "float16"), default="float32")
+    field.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a field store already at -o (and the fit saved beside it)",
+    )
     field.add_argument("-o", "--output", type=Path, required=True, help="field store directory")
     field.set_defaults(handler=_run_sim_field)
 
@@ -442,6 +447,7 @@ def _run_sim_field(args: argparse.Namespace) -> int:
         layout=args.layout,
         dtype=args.dtype,
         progress=True,
+        overwrite=args.overwrite,
     )
     print(
         f"{args.scene}: {args.cameras} cameras x {args.lights} lights x {args.points} points "

@@ -123,6 +123,7 @@ def _run_capture(args: argparse.Namespace) -> int:
             if args.calibrate:
                 raise InputError("--calibrate is for --sim; list [[calibration]] in the plan")
             config, plan = load_config(args.config), load_plan(args.plan)
+        plan.require_within_limits(config)  # before a dataset folder exists
         dataset = Dataset.create(
             args.output,
             rig_config=config.to_dict(),
@@ -198,9 +199,7 @@ def _run_verify(args: argparse.Namespace) -> int:
     from capture.dataset import Dataset
 
     report = Dataset.open(args.dataset).verify()
-    print(report.summary())
-    for problem in report.problems():
-        print(f"  {problem}")
+    print(report.summary())  # the verdict and each problem, once
     return 0 if report.ok and report.complete else 1
 
 

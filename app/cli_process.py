@@ -53,6 +53,11 @@ def add_process(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--allow-missing", action="store_true", help="leave missing images at zero")
     p.add_argument("--dtype", choices=("float32", "float16"), default="float32")
     p.add_argument("--demosaic", default="linear", help="RAW demosaicing (default linear)")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a field store already at -o (and the fit saved beside it)",
+    )
     p.set_defaults(handler=_run_process)
 
 
@@ -107,6 +112,7 @@ def _run_process(args: argparse.Namespace) -> int:
         dtype=args.dtype,
         demosaic=args.demosaic,
         progress=True,
+        overwrite=args.overwrite,
     )
     s, t, p = report.shape
     kib = 1024.0 if sys.platform == "darwin" else 1.0  # ru_maxrss: bytes on macOS, else KiB
@@ -117,6 +123,14 @@ def _run_process(args: argparse.Namespace) -> int:
         f"{report.visible_fraction:.1%}, saturated {report.saturated_fraction:.2%}, peak RSS "
         f"{peak_mb:.0f} MB -> {args.output}"
     )
+    if report.left_out:
+        shown = ", ".join(report.left_out[:3]) + (", ..." if len(report.left_out) > 3 else "")
+        print(f"note: {len(report.left_out)} planned images left out ({shown}), interpolated")
+    if report.absent_cameras:
+        print(
+            f"warning: the field lacks cameras {report.absent_cameras} of the plan (no image "
+            "of theirs was taken)"
+        )
     if report.without_dark:
         print(f"warning: {report.without_dark} exposures had no dark frame (not subtracted)")
     if report.missing:

@@ -110,7 +110,7 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
     for scene in tqdm(DEMO_SCENES, desc="relighting", unit="scene"):
         cameras = field_cameras(count, width=size, height=size)
         store = out / "fields" / f"{scene}.zarr"
-        simulate_field(store, scene, lights=count, cameras=cameras, points=points)
+        simulate_field(store, scene, lights=count, cameras=cameras, points=points, overwrite=True)
         field = ReflectanceField.open(store)
         captured = cameras[count // 2]
         view = replace(captured, azimuth_deg=(captured.azimuth_deg + 15.0) % 360.0)

@@ -150,7 +150,7 @@ def _agreement(
     direct_path = root / "direct.zarr"
     layout = field_cameras(cameras, "fibonacci", width=size, height=size)
     simulate_field(direct_path, DEMO_SCENE, lights=lights, cameras=layout, points=points,
-                   layout="fibonacci")  # fmt: skip
+                   layout="fibonacci", overwrite=True)  # fmt: skip
     built, direct = ReflectanceField.open(field_path), ReflectanceField.open(direct_path)
     both = built.visibility & direct.visibility
     a, b = built.load(), direct.load()

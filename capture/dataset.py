@@ -31,7 +31,14 @@ from pathlib import Path
 from typing import Any
 
 from capture.dataset_lock import DatasetLock
-from capture.journal import JOURNAL_NAME, ImageKey, Journal, JournalContents, read_journal
+from capture.journal import (
+    JOURNAL_NAME,
+    ImageKey,
+    Journal,
+    JournalContents,
+    completed_images,
+    read_journal,
+)
 from capture.manifest import (
     IMAGES_DIR,
     MANIFEST_NAME,
@@ -72,6 +79,8 @@ class Dataset:
         self.calibration = calibration
         self.planned = planned
         self.journal: JournalContents | None = None
+        self.journaled = False
+        """Whether the executor keeps a journal here (then it must vouch for every record)."""
         self.lock = DatasetLock(path)
         """Held while a capture writes into the dataset (one process at a time)."""
         self._records: dict[ImageKey, ImageRecord] = {}
@@ -154,6 +163,7 @@ class Dataset:
             calibration=document["calibration"],
             planned=planned_from(document["planned_images"], where),
         )
+        dataset.journaled = bool(document.get("journaled", False))
         images = document["images"]
         if not isinstance(images, list):
             raise DatasetError(f"{where}: images must be a list of records")
@@ -205,7 +215,7 @@ class Dataset:
             "calibration": self.calibration,
             "planned_images": planned,
             "images": [record.to_dict() for record in self._records.values()],
-        }
+        } | ({"journaled": True} if self.journaled else {})
 
     # -- paths --------------------------------------------------------------------------------
 
@@ -344,7 +354,12 @@ class Dataset:
         VerifyReport
             Names each image not taken, each missing, corrupt or unexpected file.
         """
-        return verify_files(self.path, self.records, self.planned, self.image_path)
+        journaled = None
+        if self.journaled:  # the journal as it is now (a run may have added to it)
+            exists = self.journal_path.exists()
+            documents = read_journal(self.journal_path).documents if exists else []
+            journaled = completed_images(documents)
+        return verify_files(self.path, self.records, self.planned, self.image_path, journaled)
 
     def remove_partials(self) -> list[str]:
         """Delete the temporary files a crash left (in ``images/`` and beside the manifest)."""

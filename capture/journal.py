@@ -47,6 +47,7 @@ __all__ = [
     "RunStatus",
     "RunSummary",
     "TruncatedLine",
+    "capture_identity",
     "completed_images",
     "config_digest",
     "last_run_status",
@@ -155,6 +156,21 @@ class ImageKey:
     def __str__(self) -> str:
         light = "" if self.light_index is None else f" light {self.light_index}"
         return f"{self.kind} camera {self.camera_index}{light} exposure {self.exposure_index}"
+
+
+def capture_identity(config: Mapping[str, Any]) -> dict[str, Any]:
+    """What of a rig config a dataset's images depend on: all of it but its serial ports.
+
+    Ports move between sessions (USB devices renumber, an emulator's pty) without changing a
+    single image; an axis, the camera, the light or the scene do.
+    """
+    identity = {key: value for key, value in config.items() if key != "name"}
+    for section in ("servos", "gantry"):
+        if isinstance(identity.get(section), Mapping):
+            identity[section] = {
+                k: v for k, v in identity[section].items() if k not in ("port", "baudrate")
+            }
+    return identity
 
 
 def config_digest(config: Mapping[str, Any]) -> str:

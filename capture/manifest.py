@@ -53,6 +53,9 @@ _MANIFEST_KEYS = (
     "planned_images",
     "images",
 )
+#: ``journaled`` (bool): the executor keeps a journal for the dataset, which must vouch for
+#: every record. Absent in datasets written without the executor.
+_OPTIONAL_MANIFEST_KEYS = ("journaled",)
 _RECORD_KEYS = (
     "kind",
     "camera_index",
@@ -312,9 +315,12 @@ def read_manifest(manifest: Path) -> dict[str, Any]:
             f"schema version {SCHEMA_VERSION}"
         )
     missing = [name for name in _MANIFEST_KEYS if name not in document]
-    unknown = sorted(name for name in document if name not in _MANIFEST_KEYS)
+    known = (*_MANIFEST_KEYS, *_OPTIONAL_MANIFEST_KEYS)
+    unknown = sorted(name for name in document if name not in known)
     if missing or unknown:
         raise DatasetError(f"{manifest}: missing fields {missing}, unknown fields {unknown}")
+    if not isinstance(document.get("journaled", False), bool):
+        raise DatasetError(f"{manifest}: journaled must be true or false")
     return document
 
 

@@ -346,6 +346,30 @@ class SweepPlan:
             if (axis := config.axes.get(role)) is not None
         )
 
+    def require_within_limits(self, config: RigConfig) -> None:
+        """Refuse the plan on ``config`` when a pose lies outside an axis' soft limits.
+
+        What ``rig plan`` reports as a violation: a capture refuses it before anything moves
+        rather than leaving the unreachable poses out.
+
+        Raises
+        ------
+        InputError
+            Naming each axis, the range the plan uses and the limits.
+        """
+        bad = [check for check in self.limit_checks(config) if not check.ok]
+        if bad:
+            ranges = "; ".join(
+                f"{c.role} uses {c.low_deg:g} .. {c.high_deg:g} deg, limits "
+                f"{c.min_deg:g} .. {c.max_deg:g} deg"
+                for c in bad
+            )
+            raise InputError(
+                f"the plan is not runnable on {config.name!r}: a pose lies outside the limits "
+                f"({ranges}); change the plan's poses or the rig's limits (rig plan shows the "
+                "dry run)"
+            )
+
     # -- as data ---------------------------------------------------------------------------
 
     def to_dict(self) -> dict[str, Any]:

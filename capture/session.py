@@ -32,13 +32,14 @@ from capture.frame_files import frame_file
 from capture.journal import (
     ExitStatus,
     ImageKey,
+    capture_identity,
     completed_images,
     config_digest,
     read_journal,
     runs,
 )
 from capture.plan import CaptureEvent, SweepPlan
-from core.errors import DeviceError, DeviceFault, RigError, SafetyError
+from core.errors import DatasetError, DeviceError, DeviceFault, RigError, SafetyError
 from rig.config import RigConfig
 from rig.devices import Frame
 from rig.pose import RigPose
@@ -232,13 +233,54 @@ class CaptureSession:
         Raises
         ------
         DatasetError
-            Another process captures into the dataset (its lock is held); nothing was done.
+            Another process captures into the dataset (its lock is held), or the rig's config
+            is not the one the dataset was captured with; nothing was done.
+        InputError
+            A pose of the plan lies outside the rig's limits; nothing was moved.
             Every other failure ends the run, with its reason, in the result.
         """
         with self.dataset.lock:
             return self._run()
 
+    def _check_same_rig(self) -> None:
+        """Refuse to add images made with another rig config to a dataset."""
+        have = capture_identity(self.dataset.rig_config)
+        now = capture_identity(self.rig.config.to_dict())
+        if config_digest(have) == config_digest(now):
+            return
+        differ = sorted(k for k in set(have) | set(now) if have.get(k) != now.get(k))
+        raise DatasetError(
+            f"{self.dataset.path} was captured with rig config {config_digest(have)[:19]}, "
+            f"this rig's is {config_digest(now)[:19]} ({', '.join(differ)} differ): its images "
+            "would mix two set-ups. Resume with the dataset's own config (drop --config), or "
+            "capture into a new dataset"
+        )
+
+    def _check_journal_vouches(self) -> None:
+        """Refuse a dataset whose images the journal does not vouch for.
+
+        A resume would take them again over their files, as if they had never been taken.
+        """
+        if not self.dataset.journaled:
+            return
+        report = self.dataset.verify()
+        if report.unvouched:
+            raise DatasetError(
+                f"{self.dataset.path}: the journal does not vouch for {len(report.unvouched)} "
+                f"of its {report.checked} images (first {report.unvouched[0].file}): "
+                "journal.jsonl was deleted, emptied or cut short, and resuming would take "
+                "them again over the files. Restore journal.jsonl from a backup, or capture "
+                "into a new dataset"
+            )
+
     def _run(self) -> SessionResult:
+        self._check_same_rig()
+        self.plan.require_within_limits(self.rig.config)
+        self._check_journal_vouches()
+        if not self.dataset.journaled:
+            # From now on the journal must vouch for every image (a deleted journal shows).
+            self.dataset.journaled = True
+            self.dataset.save()
         self._to(SessionState.RUNNING)
         start = time.perf_counter()
         pending, already, retaken, previous = self._pending()

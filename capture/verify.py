@@ -46,6 +46,8 @@ class VerifyReport:
     corrupt : records whose file's size or SHA-256 differs (or is not a regular file)
     unexpected : files under ``images/`` that no record names (dataset-relative)
     partials : temporary files a crash left behind (harmless; ``remove_partials`` deletes them)
+    unvouched : records of a journaled dataset that its journal does not vouch for (the journal
+        was deleted, emptied or cut short): their files cannot be trusted to be this capture's
     """
 
     path: Path
@@ -56,16 +58,19 @@ class VerifyReport:
     corrupt: tuple[CorruptImage, ...] = ()
     unexpected: tuple[str, ...] = ()
     partials: tuple[str, ...] = ()
+    unvouched: tuple[ImageRecord, ...] = ()
 
     @property
     def complete(self) -> bool:
-        """Every planned image has a record whose file is present and intact."""
-        return self.planned_known and not (self.not_taken or self.missing or self.corrupt)
+        """Every planned image has a record whose file is present, intact and journaled."""
+        bad = self.not_taken or self.missing or self.corrupt or self.unvouched
+        return self.planned_known and not bad
 
     @property
     def ok(self) -> bool:
-        """Nothing missing, corrupt, unexpected or not taken."""
-        return not (self.not_taken or self.missing or self.corrupt or self.unexpected)
+        """Nothing missing, corrupt, unexpected, not journaled or not taken."""
+        bad = self.not_taken or self.missing or self.corrupt or self.unexpected or self.unvouched
+        return not bad
 
     @property
     def retake(self) -> set[ImageKey]:
@@ -81,6 +86,12 @@ class VerifyReport:
             f"corrupt: {bad.record.file} ({bad.record.key}): {bad.reason}" for bad in self.corrupt
         ]
         lines += [f"unexpected: {name} (named by no record)" for name in self.unexpected]
+        if self.unvouched:
+            lines.append(
+                f"not journaled: {len(self.unvouched)} images (first {self.unvouched[0].file}) "
+                "have no event in journal.jsonl, which was deleted, emptied or cut short: "
+                "restore it from a backup, or capture into a new dataset"
+            )
         return lines
 
     def summary(self) -> str:
@@ -98,6 +109,7 @@ def verify_files(
     records: Sequence[ImageRecord],
     planned: Sequence[ImageKey] | None,
     image_path: Callable[[ImageRecord], Path],
+    journaled: set[ImageKey] | None = None,
 ) -> VerifyReport:
     """Check a dataset's records against its files: completeness, integrity, stray files.
 
@@ -112,6 +124,8 @@ def verify_files(
     image_path : callable
         The confined path of a record's file; a :class:`DatasetError` it raises makes the
         record corrupt (its path leads out of the dataset).
+    journaled : set of ImageKey, optional
+        The images the journal vouches for, when the dataset keeps one (None: not checked).
 
     Returns
     -------
@@ -144,6 +158,9 @@ def verify_files(
         corrupt=tuple(corrupt),
         unexpected=tuple(unexpected),
         partials=tuple(partials),
+        unvouched=()
+        if journaled is None
+        else tuple(record for record in records if record.key not in journaled),
     )
 
 

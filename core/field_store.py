@@ -26,7 +26,9 @@ with its distance), ``provenance`` (free-form dict: scene, tool, creation time..
 
 from __future__ import annotations
 
+import hashlib
 import os
+import shutil
 from collections import OrderedDict
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -39,18 +41,61 @@ from numpy.typing import NDArray
 from core.camera_model import PinholeCamera
 from core.errors import DatasetError, InputError
 
-__all__ = ["CACHED_SLABS", "FIELD_SCHEMA_VERSION", "FieldStoreWriter", "ReflectanceField"]
+__all__ = [
+    "CACHED_SLABS",
+    "FIELD_SCHEMA_VERSION",
+    "FieldStoreWriter",
+    "ReflectanceField",
+    "companion_paths",
+]
 
 FIELD_SCHEMA_VERSION = 1
 
 
+def companion_paths(store: str | os.PathLike[str]) -> list[Path]:
+    """Files that belong to a store and live beside it: its saved model fit, ``NAME.models.npz``.
+
+    A store replaced by another leaves none of them behind (they describe the old data).
+    """
+    path = Path(store)
+    return [path.with_name(path.name + ".models.npz")]
+
+
+def _is_store(path: Path) -> bool:
+    return (path / "zarr.json").is_file() or (path / ".zgroup").is_file()
+
+
 class FieldStoreWriter:
-    """Create a field store and fill it slab by slab (a crash leaves written slabs intact)."""
+    """Create a field store and fill it slab by slab; :meth:`finish` puts it in place.
+
+    The store is written under a temporary name beside ``path`` and renamed onto it by
+    :meth:`finish`, so a crash or an error (:meth:`abort`) never leaves a half-written store
+    under the real name, nor mixes new slabs into an old store. :meth:`finish` records the
+    ``radiance_digest`` attribute (SHA-256 over every slab's SHA-256, in camera then light
+    order), by which a saved model fit knows the data it was fitted to.
+
+    Parameters
+    ----------
+    path : the store's directory
+    overwrite : bool
+        Replace an existing store at ``path`` (and the files that belong to it, see
+        :func:`companion_paths`) when finished; without it an existing store is refused.
+    points, normals, light_directions, cameras, image_shape, dtype, light_model, provenance :
+        the field's layout (see the module docstring)
+
+    Raises
+    ------
+    InputError
+        ``path`` exists (without ``overwrite``), or is not a store or an empty folder.
+    DatasetError
+        The store cannot be created.
+    """
 
     def __init__(
         self,
         path: str | os.PathLike[str],
         *,
+        overwrite: bool = False,
         points: NDArray[np.floating] | None,
         normals: NDArray[np.floating] | None,
         light_directions: NDArray[np.floating],
@@ -78,10 +123,16 @@ class FieldStoreWriter:
         for name, values in (("points", points), ("normals", normals)):
             if values is not None and np.shape(values) != (p, 3):
                 raise InputError(f"field {name} must have shape ({p}, 3), got {np.shape(values)}")
+        self.path = Path(path)
+        self.overwrite = overwrite
+        _check_target(self.path, overwrite)
+        self.partial = self.path.with_name(f".{self.path.name}.{os.getpid()}.partial")
+        shutil.rmtree(self.partial, ignore_errors=True)
         try:
-            self.group = zarr.open_group(str(path), mode="w")
+            self.group = zarr.open_group(str(self.partial), mode="w")
         except Exception as error:  # zarr raises several types for unwritable paths
             raise DatasetError(f"{path}: cannot create the field store: {error}") from error
+        self._slab_digests: dict[tuple[int, int], bytes] = {}
         self.radiance = self.group.create_array(
             "radiance", shape=(s, t, p, 3), chunks=(1, 1, p, 3), dtype=dtype, fill_value=0.0
         )
@@ -110,11 +161,61 @@ class FieldStoreWriter:
 
     def write_slab(self, camera: int, light: int, radiance: NDArray[np.floating]) -> None:
         """Store the radiance (P, 3) of every sample for one camera and one light."""
-        self.radiance[camera, light] = np.asarray(radiance, dtype=self.radiance.dtype)
+        values = np.ascontiguousarray(radiance, dtype=self.radiance.dtype)
+        self.radiance[camera, light] = values
+        self._slab_digests[camera, light] = hashlib.sha256(values.tobytes()).digest()
 
     def write_visibility(self, camera: int, visible: NDArray[np.bool_]) -> None:
         """Store which samples (P,) camera ``camera`` sees."""
         self.visibility[camera] = np.asarray(visible, dtype=bool)
+
+    def finish(self) -> Path:
+        """Check every slab was written, record the digest and put the store at its path.
+
+        Raises
+        ------
+        DatasetError
+            A slab was never written (named); the partial store is removed.
+        """
+        s_count, t_count = self.radiance.shape[:2]
+        missing = [(s, t) for s in range(s_count) for t in range(t_count)
+                   if (s, t) not in self._slab_digests]  # fmt: skip
+        if missing:
+            self.abort()
+            listed = ", ".join(f"camera {s} light {t}" for s, t in missing[:5])
+            raise DatasetError(
+                f"{self.path}: {len(missing)} slabs were never written ({listed}"
+                f"{', ...' if len(missing) > 5 else ''}); the store was not made"
+            )
+        digest = hashlib.sha256()
+        for key in sorted(self._slab_digests):
+            digest.update(self._slab_digests[key])
+        self.group.attrs["radiance_digest"] = digest.hexdigest()
+        _check_target(self.path, self.overwrite)
+        if self.path.exists():
+            shutil.rmtree(self.path)
+        for companion in companion_paths(self.path):
+            companion.unlink(missing_ok=True)
+        os.replace(self.partial, self.path)
+        return self.path
+
+    def abort(self) -> None:
+        """Remove the partial store; whatever was at the path stays as it was."""
+        shutil.rmtree(self.partial, ignore_errors=True)
+
+
+def _check_target(path: Path, overwrite: bool) -> None:
+    if not path.exists():
+        return
+    if not path.is_dir() or not (_is_store(path) or not any(path.iterdir())):
+        raise InputError(
+            f"{path}: exists and is not a field store or an empty folder; choose another path"
+        )
+    if _is_store(path) and not overwrite:
+        raise InputError(
+            f"{path}: a field store is already there; choose another path, or replace it "
+            "(--overwrite), which also removes the model fit saved beside it"
+        )
 
 
 # --- reading ------------------------------------------------------------------------------------
@@ -140,6 +241,8 @@ class ReflectanceField:
     points, normals : ndarray, shape (P, 3), float32, or None (pixel fields may have neither)
     image_shape : (height, width) for a field of the pixels of one view, None for points
     light_model, provenance : dict, the store's attributes
+    radiance_digest : str or None, the SHA-256 the writer recorded over the radiance (None for
+        stores written before it was recorded, and for in-memory subsets)
     """
 
     path: Path
@@ -153,6 +256,7 @@ class ReflectanceField:
     light_model: dict[str, Any]
     provenance: dict[str, Any]
     radiance: Any = field(repr=False)  # the zarr array (S, T, P, 3), read on demand
+    radiance_digest: str | None = None
     cached_slabs: int = CACHED_SLABS
     _slabs: OrderedDict[int, NDArray[np.float32]] = field(default_factory=OrderedDict, repr=False)
 
@@ -226,6 +330,7 @@ class ReflectanceField:
             light_model=dict(attrs.get("light_model", {})),
             provenance=dict(attrs.get("provenance", {})),
             radiance=radiance,
+            radiance_digest=attrs.get("radiance_digest"),
             cached_slabs=cached_slabs,
         )
 

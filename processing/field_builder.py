@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Collection, Mapping
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from capture.dataset import Dataset
+from capture.journal import ImageKey
 from capture.manifest import ImageRecord
 from core.camera_model import RigCamera
 from core.errors import DatasetError, InputError
@@ -69,6 +70,9 @@ class FieldBuildReport:
     missing : list of (camera_index, light_index) without an image (plan-skipped pairs, or
         with ``allow_missing`` lost ones), interpolated from the camera's other lights
     seconds : float, wall time
+    camera_indices : the dataset's camera indices of the field's cameras, in order
+    left_out : files (or planned images) missing or not taken, left out (``allow_missing``)
+    absent_cameras : planned camera indices with no image at all: not in the field
     """
 
     path: Path
@@ -83,6 +87,9 @@ class FieldBuildReport:
     light_spread_deg: float
     missing: list[tuple[int, int]]
     seconds: float
+    camera_indices: tuple[int, ...] = ()
+    left_out: list[str] = field(default_factory=list)
+    absent_cameras: list[int] = field(default_factory=list)
 
 
 def sample_view(
@@ -153,13 +160,15 @@ def build_field(
     light_model: dict[str, Any] | None = None,
     provenance: Mapping[str, Any] | None = None,
     progress: bool = False,
+    overwrite: bool = False,
+    exclude: Collection[ImageKey] = (),
 ) -> FieldBuildReport:
     """Build the reflectance field store of a capture dataset, streaming image by image.
 
     Parameters
     ----------
     dataset : Dataset, or its directory
-    output : path of the new field store (a Zarr group; replaced if it exists)
+    output : path of the new field store (a Zarr group; see ``overwrite``)
     cloud : PointCloud, the object's surface samples (P points with normals and spacing)
     camera, calibration, light_intensity : see :func:`field_layout`
     radiance_scale : float, > 0
@@ -175,6 +184,8 @@ def build_field(
     light_model : dict, optional, the store's light model (default directional, unit intensity)
     provenance : mapping, optional, merged into the store's provenance
     progress : bool, show a tqdm progress bar
+    overwrite : bool, replace a store already at ``output`` (and the fit saved beside it)
+    exclude : image keys to leave out, as if never taken (files found missing or corrupt)
 
     Returns
     -------
@@ -191,7 +202,11 @@ def build_field(
         raise InputError(f"radiance_scale must be positive, got {radiance_scale}")
     data = dataset if isinstance(dataset, Dataset) else Dataset.open(dataset)
     layout = field_layout(
-        data, camera=camera, calibration=calibration, light_intensity=light_intensity
+        data,
+        camera=camera,
+        calibration=calibration,
+        light_intensity=light_intensity,
+        exclude=exclude,
     )
     # Pairs the plan skipped (the light where the camera is, a forbidden zone) were never to be
     # taken: their slabs are interpolated from the camera's other lights. Planned images that
@@ -216,6 +231,7 @@ def build_field(
             raise DatasetError(f"camera {pinhole} is inside the object (radius {radius:.3g})")
     store = FieldStoreWriter(
         output,
+        overwrite=overwrite,
         points=cloud.points,
         normals=cloud.normals,
         light_directions=layout.light_directions,
@@ -280,8 +296,12 @@ def build_field(
                 bar.update()
             for t in set(range(t_count)) - set(taken):
                 store.write_slab(s, t, _interpolated_slab(layout.light_directions, taken, t))
+    except BaseException:
+        store.abort()
+        raise
     finally:
         bar.close()
+    store.finish()
     visible_total = max(counts["visible"], 1)
     return FieldBuildReport(
         path=Path(output),
@@ -296,6 +316,7 @@ def build_field(
         light_spread_deg=layout.light_spread_deg,
         missing=list(layout.missing),
         seconds=time.perf_counter() - started,
+        camera_indices=layout.camera_indices,
     )
 
 

@@ -8,7 +8,7 @@ decodes the images in this order.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from capture.dataset import Dataset
+from capture.journal import ImageKey
 from capture.manifest import ImageRecord
 from core.camera_model import PinholeCamera, RigCamera
 from core.directions import angles_deg_from_direction, direction_from_angles_deg, normalize
@@ -138,6 +139,7 @@ def field_layout(
     camera: RigCamera | None = None,
     calibration: Mapping[str, Any] | None = None,
     light_intensity: float = 1.0,
+    exclude: Collection[ImageKey] = (),
 ) -> FieldLayout:
     """Cameras, lights and images of the field a dataset gives (nothing is decoded).
 
@@ -155,6 +157,7 @@ def field_layout(
         y, z][, intensity: float or [r, g, b] or null]} for light index t. Either key may be
         absent or empty (not calibrated).
     light_intensity : float, the intensity of every light not calibrated
+    exclude : image keys to leave out (files missing or corrupt): their pairs count as missing
 
     Raises
     ------
@@ -163,7 +166,7 @@ def field_layout(
     """
     calibration = {k: v for k, v in (calibration or {}).items() if k not in CALIBRATION_KINDS or v}
     light_records = sorted(
-        (r for r in dataset.records if r.kind == "light"),
+        (r for r in dataset.records if r.kind == "light" and r.key not in exclude),
         key=lambda r: (r.camera_index, r.light_index, r.exposure_index),
     )
     if not light_records:

@@ -11,21 +11,28 @@ file (:func:`point_cloud_sources`), or for a simulated capture the simulator's s
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from capture.dataset import Dataset
+from capture.verify import VerifyReport
 from core.camera_model import RigCamera
-from core.errors import InputError
+from core.errors import DatasetError, InputError
 from processing.decode import decode_image
 from processing.field_builder import FieldBuildReport, build_field
 from processing.point_cloud import PointCloud, read_point_cloud
 
-__all__ = ["FieldSources", "PointCloudSources", "point_cloud_sources", "process_dataset"]
+__all__ = [
+    "FieldSources",
+    "PointCloudSources",
+    "point_cloud_sources",
+    "process_dataset",
+    "verify_for_processing",
+]
 
 
 class FieldSources(Protocol):
@@ -150,6 +157,7 @@ def process_dataset(
     dtype: str = "float32",
     demosaic: str = "linear",
     progress: bool = False,
+    overwrite: bool = False,
 ) -> FieldBuildReport:
     """Build the field store of a dataset (``rig process``).
 
@@ -161,15 +169,22 @@ def process_dataset(
     camera_distance, fov_deg, size : the camera model where the dataset does not say it (see
         :func:`dataset_camera_model`)
     ignore_calibration : bool, use the measured poses, not the manifest's calibration
-    light_intensity, allow_missing, dtype, demosaic, progress : see
+    light_intensity, allow_missing, dtype, demosaic, progress, overwrite : see
         :func:`processing.field_builder.build_field`
 
     Raises
     ------
     InputError
         No camera model and no calibrated cameras.
+    DatasetError
+        The dataset does not verify (``rig verify``): corrupt image files, images its journal
+        does not vouch for, and (without ``allow_missing``) missing files or planned images
+        not taken. With ``allow_missing`` the missing ones are left out and listed in the
+        report (``left_out``), their slabs interpolated; a camera with no image at all is
+        absent from the field (``absent_cameras``).
     """
     data = dataset if isinstance(dataset, Dataset) else Dataset.open(dataset)
+    check = verify_for_processing(data, allow_missing=allow_missing)
     calibration = None if ignore_calibration else (data.calibration or None)
     camera = dataset_camera_model(data, distance=camera_distance, fov_deg=fov_deg, size=size)
     if camera is None and not (calibration and "cameras" in calibration):
@@ -178,7 +193,7 @@ def process_dataset(
             f"calibrate the cameras"
         )
     cloud = PointCloud.from_arrays(sources.points, sources.normals, sources.spacing)
-    return build_field(
+    report = build_field(
         data,
         output,
         cloud,
@@ -192,4 +207,51 @@ def process_dataset(
         light_model=sources.light_model,
         provenance={"tool": "rig process", **sources.provenance},
         progress=progress,
+        overwrite=overwrite,
+        exclude={record.key for record in check.missing},
     )
+    planned_cameras = {key.camera_index for key in data.planned or () if key.kind == "light"}
+    built = set(report.camera_indices)
+    return replace(
+        report,
+        left_out=[r.file for r in check.missing] + [str(k) for k in check.not_taken],
+        absent_cameras=sorted(planned_cameras - built),
+    )
+
+
+def verify_for_processing(dataset: Dataset, *, allow_missing: bool) -> VerifyReport:
+    """The dataset's verification, refused where a field built from it would be wrong.
+
+    Raises
+    ------
+    DatasetError
+        Naming the first files: corrupt images (a field is never built from them), images the
+        journal does not vouch for, and without ``allow_missing`` missing files or planned
+        images not taken.
+    """
+    report = dataset.verify()
+    where = dataset.path
+
+    def listed(names: Sequence[str]) -> str:
+        return ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+
+    if report.corrupt:
+        raise DatasetError(
+            f"{where}: {len(report.corrupt)} image files are corrupt ("
+            f"{listed([f'{b.record.file}: {b.reason}' for b in report.corrupt])}); re-take "
+            "them (rig capture --resume) before processing"
+        )
+    if report.unvouched:
+        raise DatasetError(
+            f"{where}: the journal does not vouch for {len(report.unvouched)} images; see "
+            "rig verify"
+        )
+    lost = [r.file for r in report.missing] + [str(k) for k in report.not_taken]
+    if lost and not allow_missing:
+        raise DatasetError(
+            f"{where}: {len(lost)} planned images are missing or were not taken "
+            f"({listed(lost)}); finish the capture (rig capture --resume), or build a field "
+            "without them (--allow-missing: interpolated, and cameras without any image left "
+            "out)"
+        )
+    return report

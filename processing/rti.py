@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import shutil
 import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -307,30 +306,21 @@ def _read_rti_image(path: Path, where: str) -> NDArray[np.float32]:
     return image
 
 
-def _check_output(target: Path) -> None:
-    """Refuse an output path that exists and is neither an empty folder nor a Zarr store."""
-    if not target.exists():
-        return
-    is_store = (target / "zarr.json").is_file() or (target / ".zgroup").is_file()
-    if not target.is_dir() or not (is_store or not any(target.iterdir())):
-        raise InputError(
-            f"{target}: exists and is not a field store or an empty folder; choose another path"
-        )
-
-
 def import_rti(
     lp_path: str | os.PathLike[str],
     output_store: str | os.PathLike[str],
     *,
     dtype: str = "float32",
     progress: bool = True,
+    overwrite: bool = True,
 ) -> ReflectanceField:
     """Import an RTI capture (an ``.lp`` file and its images) as a single-view pixel field.
 
     Parameters
     ----------
     lp_path : path to the ``.lp`` file; image names are relative to its folder
-    output_store : path of the field store to create (an existing field store is replaced)
+    output_store : path of the field store to create
+    overwrite : bool, replace an existing field store there (and the fit saved beside it)
     dtype : {"float32", "float16"}, storage dtype of the radiance
     progress : bool, show a progress bar (one step per image)
 
@@ -349,7 +339,8 @@ def import_rti(
         A bad ``.lp`` file (see :func:`read_lp`), a missing, unreadable or non-finite image, or
         images of different sizes; the message names the image and its ``.lp`` line.
     InputError
-        A bad ``dtype``, or an output path that exists and is not a field store.
+        A bad ``dtype``, or an output path that exists and is not a field store (or is one,
+        without ``overwrite``).
 
     Notes
     -----
@@ -369,46 +360,43 @@ def import_rti(
                 f"{lp_file}, line {lights.line(index)}: image {lights.files[index]!r} not found "
                 f"({path})"
             )
-    _check_output(target)
-
-    partial = target.with_name(f".{target.name}.{os.getpid()}.partial")
-    shutil.rmtree(partial, ignore_errors=True)
+    first = _read_rti_image(paths[0], f"{lp_file}, line {lights.line(0)}")
+    height, width = first.shape[:2]
+    camera = rti_camera(width, height)
+    writer = FieldStoreWriter(
+        target,
+        overwrite=overwrite,
+        points=None,
+        normals=None,
+        light_directions=camera_to_rig(lights.directions, camera),
+        cameras=[camera],
+        image_shape=(height, width),
+        dtype=dtype,
+        light_model={
+            "type": "directional",
+            "irradiance": 1.0,
+            "note": "RTI: intensities not calibrated",
+        },
+        provenance={
+            "source": "rti",
+            "tool": "processing.rti.import_rti",
+            "lp": str(lp_file.resolve()),
+            "images": len(lights),
+            "first_image": lights.files[0],
+            "light_frame": (
+                "the .lp directions (camera frame: x right, y up, z toward the camera) are "
+                "stored in the rig frame of a camera straight above the object"
+            ),
+            "camera_intrinsics": {
+                "distance": NOMINAL_DISTANCE,
+                "fov_deg": NOMINAL_FOV_DEG,
+                "nominal": True,
+                "note": "RTI data record neither the camera distance nor its field of view",
+            },
+            "created": datetime.now(UTC).isoformat(timespec="seconds"),
+        },
+    )
     try:
-        first = _read_rti_image(paths[0], f"{lp_file}, line {lights.line(0)}")
-        height, width = first.shape[:2]
-        camera = rti_camera(width, height)
-        writer = FieldStoreWriter(
-            partial,
-            points=None,
-            normals=None,
-            light_directions=camera_to_rig(lights.directions, camera),
-            cameras=[camera],
-            image_shape=(height, width),
-            dtype=dtype,
-            light_model={
-                "type": "directional",
-                "irradiance": 1.0,
-                "note": "RTI: intensities not calibrated",
-            },
-            provenance={
-                "source": "rti",
-                "tool": "processing.rti.import_rti",
-                "lp": str(lp_file.resolve()),
-                "images": len(lights),
-                "first_image": lights.files[0],
-                "light_frame": (
-                    "the .lp directions (camera frame: x right, y up, z toward the camera) are "
-                    "stored in the rig frame of a camera straight above the object"
-                ),
-                "camera_intrinsics": {
-                    "distance": NOMINAL_DISTANCE,
-                    "fov_deg": NOMINAL_FOV_DEG,
-                    "nominal": True,
-                    "note": "RTI data record neither the camera distance nor its field of view",
-                },
-                "created": datetime.now(UTC).isoformat(timespec="seconds"),
-            },
-        )
         steps = tqdm(paths, desc="rti", unit="image", disable=not progress)
         for index, path in enumerate(steps):
             where = f"{lp_file}, line {lights.line(index)}"
@@ -423,11 +411,9 @@ def import_rti(
         steps.close()
         writer.write_visibility(0, np.ones(height * width, dtype=bool))
     except BaseException:
-        shutil.rmtree(partial, ignore_errors=True)
+        writer.abort()
         raise
-    if target.exists():
-        shutil.rmtree(target)  # a field store or an empty folder (checked above)
-    os.replace(partial, target)
+    writer.finish()
     return ReflectanceField.open(target)
 
 

@@ -5,7 +5,9 @@ takes milliseconds. :func:`models_for_field` reads the fit saved beside a field 
 ``FIELD.models.npz``) when it was made from that same field, and fits and saves otherwise.
 
 The file is a NumPy ``.npz`` archive (no pickled objects): ``format`` (``FORMAT_VERSION``),
-the field's fingerprint (``field_shape``, ``field_lights``, ``field_points_digest``), the
+the field's fingerprint (``field_shape``, ``field_lights``, ``field_points_digest``, and
+``field_radiance_digest``: the store's digest of its data, so a fit of a replaced store is
+never reused), the
 :class:`SampleModels` arrays, and per fit ``NAME__ARRAY`` entries. It is written atomically
 (temporary name, fsync, rename), so a crash leaves the old file or none.
 """
@@ -23,7 +25,7 @@ from numpy.typing import NDArray
 
 from core.atomic import atomic_path
 from core.errors import DatasetError
-from core.field_store import ReflectanceField
+from core.field_store import ReflectanceField, companion_paths
 from processing.sample_models import (
     BasisFit,
     Fit,
@@ -35,6 +37,7 @@ from processing.sample_models import (
 
 __all__ = [
     "FORMAT_VERSION",
+    "StaleFitError",
     "default_models_path",
     "models_for_field",
     "read_sample_models",
@@ -47,8 +50,7 @@ _PARAMETRIC_ARRAYS = ("normals", "rho_d", "f0", "alpha", "lit", "fitted")
 
 def default_models_path(field_path: str | os.PathLike[str]) -> Path:
     """Where the fit of a field is kept: beside the store, ``NAME.models.npz``."""
-    path = Path(field_path)
-    return path.with_name(path.name + ".models.npz")
+    return companion_paths(field_path)[0]
 
 
 def _points_digest(field: ReflectanceField) -> str:
@@ -66,6 +68,7 @@ def write_sample_models(
         "field_shape": np.asarray(field.shape, dtype=np.int64),
         "field_lights": np.asarray(field.light_directions, dtype=np.float64),
         "field_points_digest": np.str_(_points_digest(field)),
+        "field_radiance_digest": np.str_(field.radiance_digest or ""),
         "kind": np.str_(models.kind),
         "light_directions": models.light_directions,
         "camera_frame": models.camera_frame,
@@ -103,7 +106,8 @@ def read_sample_models(
     ------
     DatasetError
         The file is missing, not a models file, of another format version, or (``field``
-        given) fitted to another field: its shape, lights or points differ.
+        given) fitted to another field: its shape, lights, points or radiance differ
+        (:class:`StaleFitError`).
     """
     source = Path(path)
     try:
@@ -145,18 +149,30 @@ def read_sample_models(
     )
 
 
+class StaleFitError(DatasetError):
+    """A saved fit belongs to another field (or to older data of this one)."""
+
+
 def _check_same_field(source: Path, data: dict[str, NDArray[Any]], field: ReflectanceField) -> None:
     shape = tuple(int(v) for v in data["field_shape"])
     if shape != field.shape:
-        raise DatasetError(
+        raise StaleFitError(
             f"{source} was fitted to a field of shape {shape}, {field.path} is {field.shape}; "
             "delete the file to fit again"
         )
     same_lights = np.allclose(data["field_lights"], field.light_directions, atol=1e-9)
     if not same_lights or str(data["field_points_digest"]) != _points_digest(field):
-        raise DatasetError(
+        raise StaleFitError(
             f"{source} was fitted to another field than {field.path} (lights or points "
             "differ); delete the file to fit again"
+        )
+    # The geometry alone cannot tell two scenes of one layout apart: the data's digest can.
+    saved = str(data.get("field_radiance_digest", ""))
+    if field.radiance_digest and saved != field.radiance_digest:
+        raise StaleFitError(
+            f"{source} was fitted to other data than {field.path} holds now (its radiance "
+            f"digest {saved[:12] or 'is missing'}, the store's {field.radiance_digest[:12]}); "
+            "delete the file to fit again"
         )
 
 
@@ -169,15 +185,22 @@ def models_for_field(
 ) -> SampleModels:
     """The fit of ``field``: read from ``path`` (default beside the field) or fitted and saved.
 
-    A saved fit is used when it was made from this field and holds every requested model
+    A saved fit is used when it was made from this field's data and holds every requested model
     (``models``: default the fitting default); otherwise the field is fitted again and the file
-    replaced. A store in a read-only place is fitted without saving.
+    replaced. A stale fit at an explicit ``path`` is refused (:class:`StaleFitError`) rather
+    than replaced: the caller named that file. A store in a read-only place is fitted without
+    saving.
     """
     target = default_models_path(field.path) if path is None else Path(path)
     if target.exists():
-        saved = read_sample_models(target, field)
-        if models is None or all(name in saved.fits for name in models):
-            return saved
+        try:
+            saved = read_sample_models(target, field)
+        except StaleFitError:
+            if path is not None:
+                raise
+        else:
+            if models is None or all(name in saved.fits for name in models):
+                return saved
     fitted = fit_sample_models(field, models, progress=progress)
     try:
         write_sample_models(target, fitted, field)

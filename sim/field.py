@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 from datetime import UTC, datetime
+from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
@@ -54,13 +55,18 @@ def simulate_field(
     layout: str = "grid",
     dtype: str = "float32",
     progress: bool = False,
-) -> FieldStoreWriter:
-    """Write the simulated field of ``scene`` to a new store at ``path``."""
+    overwrite: bool = False,
+) -> Path:
+    """Write the simulated field of ``scene`` to a new store at ``path``; returns the path.
+
+    ``overwrite`` replaces a store already there (and the model fit saved beside it).
+    """
     spec = get_scene(scene)
     samples = build_scene(scene, points)
     light_directions = hemisphere_layout(lights, layout)
     store = FieldStoreWriter(
         path,
+        overwrite=overwrite,
         points=samples.points,
         normals=samples.normals,
         light_directions=light_directions,
@@ -74,15 +80,20 @@ def simulate_field(
             "created": datetime.now(UTC).isoformat(timespec="seconds"),
         },
     )
-    for s, camera in enumerate(cameras):
-        store.write_visibility(s, camera_visibility(samples, camera))
-    steps = tqdm(total=lights * len(cameras), desc="field", unit="slab", disable=not progress)
-    for t, direction in enumerate(light_directions):
-        light = DirectionalLight((float(direction[0]), float(direction[1]), float(direction[2])))
-        lit = light_visibility(samples, light)[:, None]
+    try:
         for s, camera in enumerate(cameras):
-            radiance = shade_points(samples, camera.position, light, shadows=False) * lit
-            store.write_slab(s, t, radiance.astype(np.float32))
-            steps.update()
-    steps.close()
-    return store
+            store.write_visibility(s, camera_visibility(samples, camera))
+        steps = tqdm(total=lights * len(cameras), desc="field", unit="slab", disable=not progress)
+        for t, direction in enumerate(light_directions):
+            toward = (float(direction[0]), float(direction[1]), float(direction[2]))
+            light = DirectionalLight(toward)
+            lit = light_visibility(samples, light)[:, None]
+            for s, camera in enumerate(cameras):
+                radiance = shade_points(samples, camera.position, light, shadows=False) * lit
+                store.write_slab(s, t, radiance.astype(np.float32))
+                steps.update()
+        steps.close()
+    except BaseException:
+        store.abort()
+        raise
+    return store.finish()

@@ -191,3 +191,19 @@ def test_relight_warns_of_a_sun_over_sparse_lights_and_of_grazing_views(
     assert "warning (grazing-view)" in out and "sun-ghosting" not in out
     assert main([*base, "--env", str(sky), "--view", "30,50", "--scheme", "model"]) == 0
     assert "sun-ghosting" not in capsys.readouterr().out  # the fitted lobe follows the sun
+
+
+def test_an_existing_field_store_is_replaced_only_when_asked(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "f.zarr"
+    args = ["sim", "field", "--scene", "diffuse-sphere", "--lights", "4", "--cameras", "2",
+            "--points", "300", "--size", "16x16", "-o", str(out)]  # fmt: skip
+    assert main(args) == 0
+    fit = out.with_name("f.zarr.models.npz")
+    fit.write_bytes(b"a fit of the old data")
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert str(out) in err and "--overwrite" in err and fit.exists()
+    assert main([*args, "--overwrite"]) == 0
+    assert not fit.exists()  # the old store's fit went with it

@@ -10,7 +10,7 @@ import pytest
 
 from app.cli_process import add_process
 from capture.dataset import Dataset, ImageKey
-from core.errors import InputError
+from core.errors import DatasetError, InputError
 from core.field_store import ReflectanceField
 from core.image_io import write_linear16_tiff
 from sim.scenes import build_scene
@@ -97,3 +97,34 @@ def test_other_captures_say_what_they_lack(tmp_path: Path) -> None:
     field = ReflectanceField.open(out)
     assert field.shape == (1, 1, 500) and field.cameras[0].width == SIZE
     assert field.visibility.any() and not field.load().any()
+
+
+def test_process_refuses_what_verify_refuses(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from processing.process_dataset import verify_for_processing
+
+    capture = make_capture(tmp_path, points=500)
+    dataset = Dataset.open(capture.path)
+    victim = next(r for r in dataset.records if r.kind == "light")
+    path = dataset.image_path(victim)
+    path.write_bytes(path.read_bytes()[:-10] + b"0123456789")  # same size, other bytes
+    with pytest.raises(DatasetError, match=rf"image files are corrupt \({victim.file}"):
+        verify_for_processing(Dataset.open(capture.path), allow_missing=True)
+    with pytest.raises(DatasetError, match="corrupt"):
+        run(["process", str(capture.path), "-o", str(tmp_path / "f.zarr")])
+    assert not (tmp_path / "f.zarr").exists()
+
+
+def test_a_deleted_image_is_left_out_only_when_allowed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    capture = make_capture(tmp_path, points=500)
+    dataset = Dataset.open(capture.path)
+    victim = next(r for r in dataset.records if r.kind == "light")
+    dataset.image_path(victim).unlink()
+    with pytest.raises(DatasetError, match=rf"1 planned images are missing.*{victim.file}"):
+        run(["process", str(capture.path), "-o", str(tmp_path / "f.zarr")])
+    argv = ["process", str(capture.path), "-o", str(tmp_path / "f.zarr"), "--allow-missing"]
+    assert run(argv) == 0
+    assert f"1 planned images left out ({victim.file})" in capsys.readouterr().out

@@ -20,7 +20,7 @@ from capture.grid_plan import grid_plan
 from capture.journal import read_journal
 from capture.plan import SweepPlan
 from capture.session import CaptureSession, SessionResult, SessionState
-from core.errors import DeviceError
+from core.errors import DatasetError, DeviceError
 from rig.config import RigConfig
 from rig.config_cameras import CameraFaultConfig
 from rig.hardware import Rig
@@ -350,3 +350,68 @@ def test_a_second_capture_of_a_running_dataset_is_refused(
     # The holder is gone (killed): its lock went with it, and the resume completes the run.
     assert main(["capture", "--resume", str(path), "--quiet"]) == 0
     assert Dataset.open(path).verify().complete
+
+
+def test_a_resume_with_another_rig_config_is_refused(tmp_path: Path) -> None:
+    # The images of another object (another camera section) would mix into this dataset.
+    with _session(tmp_path, _config(), _plan()) as (session, _, rig):
+        capture = rig.capture
+
+        def capture_then_pause(exposure_ms: float) -> Any:
+            session.request_pause()
+            return capture(exposure_ms)
+
+        rig.capture = capture_then_pause  # type: ignore[method-assign]
+        assert session.run().exit_status == "paused"
+    other = simulated_capture_config("textured-torus", size=32, points=1500, speed=20.0)
+    with _session(tmp_path, other, _plan()) as (session, simulated, _):
+        with pytest.raises(DatasetError, match=r"captured with rig config sha256:.*camera differ"):
+            session.run()
+        assert not any("G1" in line for line in simulated.gantry.lines)
+    # Its own config (on other ports: they may move between sessions) resumes it.
+    with _session(tmp_path, _config(), _plan()) as (session, _, _):
+        assert session.run().exit_status == "success"
+
+
+@pytest.mark.parametrize("damage", ["deleted", "emptied"])
+def test_a_dataset_whose_journal_is_gone_is_refused_not_retaken(
+    tmp_path: Path, reference: dict[str, str], damage: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with _session(tmp_path, _config(), _plan()) as (session, _, _):
+        assert session.run().exit_status == "success"
+    journal = tmp_path / "d" / "journal.jsonl"
+    if damage == "deleted":
+        journal.unlink()
+    else:
+        journal.write_text("", encoding="utf-8")
+    assert main(["verify", str(tmp_path / "d")]) == 1
+    out = capsys.readouterr().out
+    assert "NOT OK" in out and out.count("not journaled") == 1
+    with _session(tmp_path, _config(), _plan()) as (session, simulated, _):
+        with pytest.raises(DatasetError, match="journal does not vouch for 12 of its 12 images"):
+            session.run()
+        assert not any("G1" in line for line in simulated.gantry.lines)
+    assert _digests(tmp_path / "d") == reference  # nothing was taken again over them
+
+
+def test_an_interrupted_capture_is_processed_only_when_told_and_says_what_it_lacks(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with _session(tmp_path, _config(), _plan()) as (session, _, rig):
+        capture = rig.capture
+        taken = []
+
+        def capture_then_pause(exposure_ms: float) -> Any:
+            taken.append(exposure_ms)
+            if len(taken) == 4:  # camera 0's dark frame and its first lights
+                session.request_pause()
+            return capture(exposure_ms)
+
+        rig.capture = capture_then_pause  # type: ignore[method-assign]
+        assert session.run().exit_status == "paused"
+    argv = ["process", str(tmp_path / "d"), "-o", str(tmp_path / "f.zarr")]
+    assert main(argv) == 2
+    assert "were not taken" in capsys.readouterr().err
+    assert main([*argv, "--allow-missing"]) == 0
+    out = capsys.readouterr().out
+    assert "planned images left out" in out and "the field lacks cameras [1]" in out

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 import zarr
 
+from core.camera_model import PinholeCamera
 from core.errors import DatasetError, InputError
-from core.field_store import ReflectanceField
+from core.field_store import FieldStoreWriter, ReflectanceField
 from sim.field import field_cameras, simulate_field
 
 
@@ -63,3 +64,35 @@ def test_a_subset_holds_the_chosen_slabs_in_memory(tmp_path: Path) -> None:
     assert part.cameras == [field.cameras[2], field.cameras[0]]
     with pytest.raises(InputError, match=r"light indices must be in 0\.\.4"):
         field.subset(lights=np.array([5]))
+
+
+def test_a_store_is_put_in_place_only_when_complete(tmp_path: Path) -> None:
+    cameras = [PinholeCamera(0.0, 30.0, width=4, height=4)]
+    lights = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+
+    def writer(**options: bool) -> FieldStoreWriter:
+        return FieldStoreWriter(
+            tmp_path / "f.zarr", points=None, normals=None, light_directions=lights,
+            cameras=cameras, image_shape=(2, 3), **options,
+        )  # fmt: skip
+
+    first = writer()
+    first.write_slab(0, 0, np.ones((6, 3)))
+    assert not (tmp_path / "f.zarr").exists()  # nothing under the real name while writing
+    with pytest.raises(DatasetError, match=r"1 slabs were never written.*camera 0 light 1"):
+        first.finish()
+    assert not list(tmp_path.iterdir())  # the partial store went too
+    second = writer()
+    for t in range(2):
+        second.write_slab(0, t, np.full((6, 3), t + 1.0))
+    second.finish()
+    digest = ReflectanceField.open(tmp_path / "f.zarr").radiance_digest
+    assert digest is not None and len(digest) == 64
+    # A failed replacement leaves the old store as it was.
+    third = writer(overwrite=True)
+    third.write_slab(0, 0, np.zeros((6, 3)))
+    third.abort()
+    kept = ReflectanceField.open(tmp_path / "f.zarr")
+    assert kept.radiance_digest == digest and float(kept.load().max()) == 2.0
+    with pytest.raises(InputError, match="already there"):
+        writer()

@@ -1,15 +1,17 @@
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from core.errors import DatasetError
+from core.errors import DatasetError, InputError
 from core.field_store import ReflectanceField
 from core.sample_data import rti_capture_path
 from processing.rti import import_rti
 from processing.sample_model_store import (
+    StaleFitError,
     default_models_path,
     models_for_field,
     read_sample_models,
@@ -103,3 +105,30 @@ def test_broken_files_are_named(tmp_path: Path, content: bytes | None) -> None:
     with pytest.raises(DatasetError, match=message) as error:
         read_sample_models(path)
     assert str(path) in str(error.value)
+
+
+def test_a_fit_is_not_reused_for_other_data_of_the_same_geometry(tmp_path: Path) -> None:
+    # A glossy store replaced by a diffuse scene of the same layout: shape, lights and points
+    # all agree, only the data differ; the old glossy fit must not relight it.
+    cameras = field_cameras(4, width=32, height=32)
+    path = tmp_path / "f.zarr"
+    simulate_field(path, "glossy-sphere", lights=8, cameras=cameras, points=400)
+    glossy = models_for_field(ReflectanceField.open(path))
+    kept = tmp_path / "kept.npz"
+    write_sample_models(kept, glossy, ReflectanceField.open(path))
+    with pytest.raises(InputError, match=r"already there.*--overwrite"):
+        simulate_field(path, "diffuse-sphere", lights=8, cameras=cameras, points=400)
+    simulate_field(path, "diffuse-sphere", lights=8, cameras=cameras, points=400, overwrite=True)
+    assert not default_models_path(path).exists()  # what belonged to the old store went with it
+    diffuse = ReflectanceField.open(path)
+    with pytest.raises(StaleFitError, match="other data"):
+        read_sample_models(kept, diffuse)
+    with pytest.raises(StaleFitError):
+        models_for_field(diffuse, kept)  # a file the caller named is refused, not replaced
+    # Beside the store, a stale fit is simply fitted again.
+    shutil.copy(kept, default_models_path(path))  # the glossy fit, planted beside the store
+    refitted = models_for_field(diffuse)
+    lobe = {name: m.fits["lambert+ggx"] for name, m in (("glossy", glossy), ("new", refitted))}
+    assert isinstance(lobe["glossy"], ParametricFit) and isinstance(lobe["new"], ParametricFit)
+    assert float(lobe["new"].f0.mean()) < 0.1 * float(lobe["glossy"].f0.mean())  # no lobe now
+    assert read_sample_models(default_models_path(path), diffuse).sample_count == 400

@@ -88,6 +88,7 @@ def _pixel_field(
     for t in range(t_count):
         writer.write_slab(0, t, values[t].astype(np.float32))
     writer.write_visibility(0, np.ones(p_count, dtype=bool))
+    writer.finish()
     return ReflectanceField.open(tmp / name)
 
 

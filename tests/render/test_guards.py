@@ -116,11 +116,14 @@ def test_an_unwritten_camera_of_a_store_is_found(tmp_path: Path) -> None:
                              normals=samples.normals, light_directions=hemisphere_layout(4),
                              cameras=cameras)  # fmt: skip
     source = ReflectanceField.open(complete)
-    for s in (0, 2):  # processing stopped before camera 1's images
+    for s in (0, 2):
         store.write_visibility(s, source.visibility[s])
         for t in range(4):
             store.write_slab(s, t, source.camera_slab(s)[t])
     store.write_visibility(1, source.visibility[1])
+    for t in range(4):  # camera 1 recorded nothing (a lens cap, a dead cable)
+        store.write_slab(1, t, np.zeros_like(source.camera_slab(1)[t]))
+    store.finish()
     partial = ReflectanceField.open(tmp_path / "partial.zarr")
     assert empty_cameras(partial) == [1]
     warning = empty_camera_warning(partial)

@@ -235,6 +235,7 @@ def rti(tmp_path_factory: pytest.TempPathFactory) -> ReflectanceField:
     for t in range(len(lights)):
         writer.write_slab(0, t, values[t].astype(np.float32))
     writer.write_visibility(0, np.ones(height * width, dtype=bool))
+    writer.finish()
     return ReflectanceField.open(path)
 
 

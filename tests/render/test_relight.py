@@ -148,6 +148,7 @@ def test_pixel_fields_relight_their_one_view(tmp_path: Path) -> None:
     for t in range(5):
         store.write_slab(0, t, values[t])
     store.write_visibility(0, np.ones(24, dtype=bool))
+    store.finish()
     field = ReflectanceField.open(tmp_path / "rti.zarr")
     relighter = Relighter(field, RelightSettings(scheme="projection"))
     relighter.set_lighting(panorama_from_array(_panorama(6), source="test"))

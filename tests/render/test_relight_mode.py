@@ -50,6 +50,7 @@ def test_a_field_the_models_cannot_explain_is_interpolated(tmp_path: Path) -> No
         for t in range(len(lights)):
             writer.write_slab(s, t, np.full((2, 3), 0.2, dtype=np.float32))
         writer.write_visibility(s, np.ones(2, dtype=bool))
+    writer.finish()
     field = ReflectanceField.open(tmp_path / "glow.zarr")
     choice = most_accurate_mode(field)
     assert isinstance(choice.mode, RelightSettings) and choice.mode.scheme == "pixels"
