@@ -15,13 +15,14 @@ from pathlib import Path
 from typing import Any
 
 from app.cli_advise import add_advise
+from app.cli_args import angles, count, finite, image_size, positive, whole
 from app.cli_bench import add_bench_parser
 from app.cli_calibrate import add_calibrate
 from app.cli_capture import add_capture
 from app.cli_plan import add_plan
 from app.cli_process import add_process
 from app.cli_rig import add_doctor, add_sim_start
-from core.errors import RigError
+from core.errors import InputError, RigError
 
 __all__ = ["build_parser", "main"]
 
@@ -37,9 +38,9 @@ def _add_sample(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
         "lights.png to the output directory.",
     )
     p.add_argument("panorama", type=Path, help="panorama file (.exr, .hdr, .png, .jpg)")
-    p.add_argument("-k", type=int, default=64, help="number of lights (default 64)")
+    p.add_argument("-k", type=count, default=64, help="number of lights (default 64)")
     p.add_argument("--method", choices=SAMPLERS, default="tmed", help="sampler (default tmed)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=whole, default=0, help="random seed (default 0)")
     p.add_argument(
         "--exact",
         action=argparse.BooleanOptionalAction,
@@ -50,8 +51,8 @@ def _add_sample(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
         "--paper", action="store_true", help="diffuse plain pixel luminance, as the paper"
     )
     p.add_argument("--modulation", type=Path, help="image multiplying the sampling density")
-    p.add_argument("--yaw", type=float, default=0.0, help="rotate the environment, degrees CCW")
-    p.add_argument("--exposure", type=float, default=1.0, help="radiance scale (default 1)")
+    p.add_argument("--yaw", type=finite, default=0.0, help="rotate the environment, degrees CCW")
+    p.add_argument("--exposure", type=positive, default=1.0, help="radiance scale (default 1)")
     p.add_argument("--resample", action="store_true", help="resize a panorama that is not 2:1")
     p.add_argument("-o", "--output", type=Path, required=True, help="output directory")
     p.set_defaults(handler=_run_sample)
@@ -63,6 +64,8 @@ def _run_sample(args: argparse.Namespace) -> int:
     from render.lighting_outputs import write_lighting_outputs
 
     panorama = read_panorama(args.panorama, resample=args.resample)
+    if panorama.note:
+        print(panorama.note)
     controls = LightingControls(
         k=args.k,
         method=args.method,
@@ -105,11 +108,11 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--scheme", choices=(*SCHEMES, "model"), help="how the panorama lights the "
                    "field; model: through per-sample models fitted to it (default: the most "
                    "accurate, chosen by leave-one-light-out error)")  # fmt: skip
-    p.add_argument("-k", type=int, help="sampled lights (default 64; scheme model: sample K "
+    p.add_argument("-k", type=count, help="sampled lights (default 64; scheme model: sample K "
                    "lights instead of the panorama's grid)")  # fmt: skip
     p.add_argument("--model", choices=("auto", "auto-per-sample", *MODELS), default="auto",
                    help="scheme model: the model (default: by leave-one-light-out)")  # fmt: skip
-    p.add_argument("--grid", type=int, default=MOST_ACCURATE_MODELS.grid_height,
+    p.add_argument("--grid", type=count, default=MOST_ACCURATE_MODELS.grid_height,
                    help="scheme model: the panorama summed into GRID x 2 GRID lights (default "
                    f"{MOST_ACCURATE_MODELS.grid_height})")  # fmt: skip
     p.add_argument("--models", type=Path, help="saved fit of the field (default: FIELD.models.npz "
@@ -117,13 +120,14 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--sampler", choices=SAMPLERS, default="tmed", help="sampler (default tmed)")
     p.add_argument("--interp", choices=METHODS, help="interpolation over the measured lights")
     p.add_argument("--view-interp", choices=METHODS, help="interpolation over the cameras")
-    p.add_argument("-m", type=int, default=3, help="nearest measured lights (paper, default 3)")
-    p.add_argument("-n", type=int, default=3, help="nearest measured cameras (paper, default 3)")
+    p.add_argument("-m", type=count, help="nearest measured lights (paper, default 3)")
+    p.add_argument("-n", type=count, help="nearest measured cameras (paper, default 3)")
     p.add_argument("--paper", action="store_true", help="the paper's configuration exactly")
-    p.add_argument("--view", type=_angles, help="camera AZ,INCL in degrees (pixel fields: theirs)")
+    p.add_argument("--view", type=angles, help="camera AZ,INCL in degrees: required for a field of "
+                   "points; a field of pixels (RTI) has its own view")  # fmt: skip
     _add_camera_options(p)
-    p.add_argument("--yaw", type=float, default=0.0, help="rotate the environment, degrees CCW")
-    p.add_argument("--exposure", type=float, default=1.0, help="radiance scale (default 1)")
+    p.add_argument("--yaw", type=finite, default=0.0, help="rotate the environment, degrees CCW")
+    p.add_argument("--exposure", type=positive, default=1.0, help="radiance scale (default 1)")
     p.add_argument("--modulation", type=Path, help="image multiplying the sampling density of "
                    "sampled lights (any resolution; zero forbids samples)")  # fmt: skip
     p.add_argument(
@@ -132,8 +136,8 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
         default="environment",
         help="for .gif/.mp4: orbit the camera, or rotate the environment (default)",
     )
-    p.add_argument("--frames", type=int, default=36, help="frames of a sequence (default 36)")
-    p.add_argument("--fps", type=float, default=12.0, help="frames per second (default 12)")
+    p.add_argument("--frames", type=count, default=36, help="frames of a sequence (default 36)")
+    p.add_argument("--fps", type=positive, default=12.0, help="frames per second (default 12)")
     p.add_argument(
         "--renderer",
         choices=("splat", "pyvista"),
@@ -156,6 +160,8 @@ def _run_relight(args: argparse.Namespace) -> int:
             f"{args.output}: write one of {', '.join(IMAGE_SUFFIXES + SEQUENCE_SUFFIXES)}"
         )
     panorama = read_panorama(args.env)
+    if panorama.note:
+        print(panorama.note)
     modulation = None if args.modulation is None else read_modulation_map(args.modulation)
     with open_field_or_rti(args.field, progress=True) as field:
         return _relight_field(args, field, panorama, modulation, suffix)
@@ -180,9 +186,12 @@ def _relight_field(
         camera = PinholeCamera(
             args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
         )
+    s_count, t_count, _ = field.shape
+    for flag, value, have, what in (("-m", args.m, t_count, "lights"),
+                                    ("-n", args.n, s_count, "cameras")):  # fmt: skip
+        if value is not None and value > have:
+            raise InputError(f"{flag} {value}: {args.field} has only {have} measured {what}")
     if suffix not in IMAGE_SUFFIXES:
-        if args.frames < 1:
-            raise RigError(f"--frames must be at least 1, got {args.frames}")
         if args.sequence == "turntable" and field.sample_kind == "pixels":
             raise RigError(f"{args.field} holds one fixed view: use --sequence environment")
     mode, models = _relight_mode(args, field)
@@ -248,15 +257,15 @@ def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any]:
             model=args.model, lighting=lighting, k=k, sampler=args.sampler, grid_height=args.grid
         )
         return mode, models_for_field(field, args.models, progress=True)
-    flags = (args.scheme, args.interp, args.view_interp, args.k)
+    flags = (args.scheme, args.interp, args.view_interp, args.k, args.m, args.n)
     if all(flag is None for flag in flags):
         choice = most_accurate_mode(field, models_path=args.models, progress=True)
         print(f"relighting mode: {choice.reason}")
         if choice.mode == MOST_ACCURATE_MODELS:
             return replace(MOST_ACCURATE_MODELS, grid_height=args.grid), choice.models
         return choice.mode, choice.models  # the fit still informs the warnings
-    settings = RelightSettings(args.scheme or "sampled", k=k, sampler=args.sampler, m=args.m,
-                               n=args.n)  # fmt: skip
+    settings = RelightSettings(args.scheme or "sampled", k=k, sampler=args.sampler,
+                               m=args.m or 3, n=args.n or 3)  # fmt: skip
     if args.interp:
         settings = replace(settings, interpolation=args.interp)
     if args.view_interp:
@@ -342,12 +351,14 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     )
     render.add_argument("--scene", required=True, help="scene name (see rig sim scenes)")
     render.add_argument("--env", type=Path, required=True, help="panorama file")
-    render.add_argument("--view", type=_angles, required=True, help="camera AZ,INCL in degrees")
+    render.add_argument("--view", type=angles, required=True, help="camera AZ,INCL in degrees")
     _add_camera_options(render)
-    render.add_argument("--points", type=int, default=100_000, help="surface points (default 100k)")
+    render.add_argument(
+        "--points", type=count, default=100_000, help="surface points (default 100k)"
+    )
     render.add_argument(
         "--grid",
-        type=int,
+        type=whole,
         default=32,
         help="pre-filter the panorama into GRID x 2 GRID directions (default 32; error measured "
         "in the docs); 0 = every pixel (exact, slow)",
@@ -364,19 +375,23 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         ".dng Bayer raw (the last three through the sensor model: exposure, noise, saturation).",
     )
     photo.add_argument("--scene", required=True, help="scene name (see rig sim scenes)")
-    photo.add_argument("--view", type=_angles, required=True, help="camera AZ,INCL in degrees")
-    photo.add_argument("--light", type=_angles, required=True, help="light AZ,INCL in degrees")
+    photo.add_argument("--view", type=angles, required=True, help="camera AZ,INCL in degrees")
+    photo.add_argument("--light", type=angles, required=True, help="light AZ,INCL in degrees")
     photo.add_argument(
-        "--light-distance", type=float, help="point light at this distance (default: directional)"
+        "--light-distance",
+        type=positive,
+        help="point light at this distance (default: directional)",
     )
     _add_camera_options(photo)
-    photo.add_argument("--points", type=int, default=250_000, help="surface points (default 250k)")
+    photo.add_argument(
+        "--points", type=count, default=250_000, help="surface points (default 250k)"
+    )
     photo.add_argument(
         "--exposure-time",
-        type=float,
+        type=positive,
         help="seconds (default: auto, the brightest 1%% of the object at 80%% of saturation)",
     )
-    photo.add_argument("--seed", type=int, default=0, help="sensor noise seed (default 0)")
+    photo.add_argument("--seed", type=whole, default=0, help="sensor noise seed (default 0)")
     photo.add_argument("--no-noise", action="store_true", help="expected values, no noise")
     photo.add_argument("-o", "--output", type=Path, required=True, help=".exr/.png/.jpg/.tif/.dng")
     photo.set_defaults(handler=_run_sim_photo)
@@ -389,10 +404,12 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         "visibility masks, and write them as a Zarr field store.",
     )
     field.add_argument("--scene", required=True, help="scene name (see rig sim scenes)")
-    field.add_argument("--lights", type=int, required=True, help="number of light directions T")
-    field.add_argument("--cameras", type=int, required=True, help="number of cameras S")
+    field.add_argument("--lights", type=count, required=True, help="number of light directions T")
+    field.add_argument("--cameras", type=count, required=True, help="number of cameras S")
     field.add_argument("--layout", choices=("grid", "fibonacci"), default="grid")
-    field.add_argument("--points", type=int, default=100_000, help="surface points (default 100k)")
+    field.add_argument(
+        "--points", type=count, default=100_000, help="surface points (default 100k)"
+    )
     _add_camera_options(field)
     field.add_argument("--dtype", choices=("float32", "float16"), default="float32")
     field.add_argument(
@@ -404,27 +421,13 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     field.set_defaults(handler=_run_sim_field)
 
 
-def _angles(text: str) -> tuple[float, float]:
-    try:
-        azimuth, inclination = (float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected AZ,INCL in degrees, got {text!r}") from None
-    return azimuth, inclination
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
-    return width, height
-
-
 def _add_camera_options(p: argparse.ArgumentParser) -> None:
     """Camera flags shared by every command that renders a view (same defaults everywhere)."""
-    p.add_argument("--distance", type=float, default=4.0, help="camera distance (default 4)")
-    p.add_argument("--fov", type=float, default=40.0, help="horizontal field of view, degrees")
-    p.add_argument("--size", type=_size, default=(512, 512), help="image WIDTHxHEIGHT (512x512)")
+    p.add_argument("--distance", type=positive, default=4.0, help="camera distance (default 4)")
+    p.add_argument("--fov", type=positive, default=40.0, help="horizontal field of view, degrees")
+    p.add_argument(
+        "--size", type=image_size, default=(512, 512), help="image WIDTHxHEIGHT (512x512)"
+    )
 
 
 def _run_sim_field(args: argparse.Namespace) -> int:
@@ -467,6 +470,8 @@ def _run_sim_render(args: argparse.Namespace) -> int:
         raise RigError(f"{args.output}: the ground truth is written as OpenEXR (.exr)")
     spec = get_scene(args.scene)
     panorama = read_panorama(args.env)
+    if panorama.note:
+        print(panorama.note)
     camera = PinholeCamera(
         args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
     )
@@ -568,8 +573,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``rig`` console script; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    """Entry point of the ``rig`` console script; returns the exit status.
+
+    A bad argument is refused by argparse (its message, status 2) and returned as the
+    status, like every other refusal, rather than leaving by ``SystemExit``.
+    """
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as leaving:  # argparse's error (2) and --help (0)
+        return leaving.code if isinstance(leaving.code, int) else 2
     try:
         status: int = args.handler(args)
     except RigError as error:

@@ -11,6 +11,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from app.cli_args import count, positive
+
 if TYPE_CHECKING:
     from render.advisor import Advice
 
@@ -37,9 +39,11 @@ def add_advise(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 def add_advisor_options(p: argparse.ArgumentParser) -> None:
     """The options ``rig advise`` and ``rig plan --advise`` share."""
     p.add_argument(
-        "--tolerance", type=float, default=0.02, help="relative RMSE allowed (default 0.02)"
+        "--tolerance", type=positive, default=0.02, help="relative RMSE allowed (default 0.02)"
     )
-    p.add_argument("--samples", type=int, default=3000, help="samples to predict on (default 3000)")
+    p.add_argument(
+        "--samples", type=count, default=3000, help="samples to predict on (default 3000)"
+    )
 
 
 def run_advisor(
@@ -55,6 +59,8 @@ def run_advisor(
 
     field = ReflectanceField.open(field_path)
     panorama = read_panorama(env)
+    if panorama.note:
+        print(panorama.note)
     s, t, p = field.shape
     print(f"{field_path}: {s} cameras x {t} lights x {p} samples; environment {env}")
     advice = Advisor(field, samples=samples, progress=True).advise(panorama, tolerance)

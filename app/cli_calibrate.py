@@ -11,6 +11,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from app.cli_args import positive
 from core.errors import InputError
 
 __all__ = ["add_calibrate"]
@@ -28,8 +29,8 @@ def add_calibrate(commands: argparse._SubParsersAction[argparse.ArgumentParser])
         "pose, and store the calibration in the manifest (rig process then uses it).",
     )
     p.add_argument("dataset", type=Path, help="capture dataset directory")
-    p.add_argument("--camera-distance", type=float, help="nominal camera distance (config's)")
-    p.add_argument("--fov", type=float, help="nominal horizontal field of view, deg (config's)")
+    p.add_argument("--camera-distance", type=positive, help="nominal camera distance (config's)")
+    p.add_argument("--fov", type=positive, help="nominal horizontal field of view, deg (config's)")
     p.add_argument(
         "--intrinsics",
         choices=("auto", "board", "nominal"),
@@ -37,15 +38,15 @@ def add_calibrate(commands: argparse._SubParsersAction[argparse.ArgumentParser])
         help="from the ChArUco views (auto: with 6 or more), or the nominal camera's",
     )
     p.add_argument("--board", default="5x5", help="ChArUco squares XxY (default 5x5)")
-    p.add_argument("--square-length", type=float, default=0.45, help="scene units (0.45)")
-    p.add_argument("--marker-length", type=float, default=0.33, help="scene units (0.33)")
+    p.add_argument("--square-length", type=positive, default=0.45, help="scene units (0.45)")
+    p.add_argument("--marker-length", type=positive, default=0.33, help="scene units (0.33)")
     p.add_argument("--dictionary", default="DICT_4X4_50", help="ArUco dictionary (DICT_4X4_50)")
-    p.add_argument("--sphere-radius", type=float, default=1.0, help="mirror sphere radius (1)")
-    p.add_argument("--white-albedo", type=float, default=0.8, help="white target albedo (0.8)")
-    p.add_argument("--white-half-size", type=float, default=1.5, help="its half side (1.5)")
+    p.add_argument("--sphere-radius", type=positive, default=1.0, help="mirror sphere radius (1)")
+    p.add_argument("--white-albedo", type=positive, default=0.8, help="white target albedo (0.8)")
+    p.add_argument("--white-half-size", type=positive, default=1.5, help="its half side (1.5)")
     p.add_argument(
         "--light-distance",
-        type=float,
+        type=positive,
         help="point lights at this distance (default: a simulated config's, else distant)",
     )
     p.add_argument("--dry-run", action="store_true", help="print, do not store")

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from app.cli_args import count, image_size, positive
 from capture.calibration_plan import with_calibration_captures
 from core.errors import InputError
 from sim.simulated_rig import simulated_capture_config
@@ -40,16 +41,22 @@ def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--config", type=Path, help="rig config (TOML)")
     p.add_argument("--plan", type=Path, help="sweep plan (TOML)")
     p.add_argument("--sim", action="store_true", help="the simulated rig, in this process")
-    p.add_argument("--cameras", type=int, default=6, help="--sim: camera poses (default 6)")
-    p.add_argument("--lights", type=int, default=8, help="--sim: light poses (default 8)")
+    p.add_argument("--cameras", type=count, default=6, help="--sim: camera poses (default 6)")
+    p.add_argument("--lights", type=count, default=8, help="--sim: light poses (default 8)")
     p.add_argument("--scene", default="glossy-sphere", help="--sim: scene (default glossy-sphere)")
     p.add_argument("--layout", choices=("fibonacci", "grid"), default="fibonacci",
                    help="--sim: camera and light layout (default fibonacci)")  # fmt: skip
-    p.add_argument("--size", type=int, default=128, help="--sim: image side, pixels (default 128)")
-    p.add_argument("--points", type=int, default=20_000, help="--sim: scene points (default 20k)")
-    p.add_argument("--exposure-ms", type=float, default=40.0, help="--sim: exposure (default 40)")
+    p.add_argument("--size", type=image_size, default=(128, 128),
+                   help="--sim: image WIDTHxHEIGHT (default 128x128)")  # fmt: skip
+    p.add_argument("--points", type=count, default=20_000, help="--sim: scene points (default 20k)")
     p.add_argument(
-        "--speed", type=float, default=1.0, help="--sim: axis speed factor (default 1: real time)"
+        "--exposure-ms", type=positive, default=40.0, help="--sim: exposure (default 40)"
+    )
+    p.add_argument(
+        "--speed",
+        type=positive,
+        default=1.0,
+        help="--sim: axis speed factor (default 1: real time)",
     )
     p.add_argument(
         "--calibrate",
@@ -62,11 +69,15 @@ def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
 
     v = commands.add_parser(
         "verify",
-        help="check a dataset's completeness and integrity",
-        description="Check every image's size and SHA-256 against the manifest and journal, list "
-        "missing, corrupt and unexpected files. Exits 1 when anything is wrong.",
+        help="check a dataset's or a field store's completeness and integrity",
+        description="A dataset: check every image's size and SHA-256 against the manifest and "
+        "journal, list missing, corrupt and unexpected files. A field store (rig process, rig "
+        "sim field): read every chunk, check none is missing or damaged, every value is "
+        "finite and the radiance matches the digest recorded when it was written. Exits 1 "
+        "when anything is wrong.",
     )
-    v.add_argument("dataset", type=Path)
+    v.add_argument("dataset", type=Path, help="a dataset folder or a field store (.zarr)")
+    v.add_argument("--quiet", action="store_true", help="no progress bar")
     v.set_defaults(handler=_run_verify)
 
     e = commands.add_parser(
@@ -197,7 +208,13 @@ def _capture(config: Any, dataset: Any, plan: Any, *, progress: bool) -> Any:
 
 def _run_verify(args: argparse.Namespace) -> int:
     from capture.dataset import Dataset
+    from core.field_integrity import check_store
+    from core.field_store import is_field_store
 
+    if is_field_store(args.dataset):
+        check = check_store(args.dataset, progress=not args.quiet)
+        print(check.summary())
+        return 0 if check.ok else 1
     report = Dataset.open(args.dataset).verify()
     print(report.summary())  # the verdict and each problem, once
     return 0 if report.ok and report.complete else 1

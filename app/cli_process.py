@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from app.cli_args import count, image_size, positive
 from core.errors import InputError
 
 __all__ = ["add_process"]
@@ -34,17 +35,17 @@ def add_process(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
     source = p.add_mutually_exclusive_group()
     source.add_argument("--points", type=Path, help="the object's point cloud (.ply or .npz)")
     source.add_argument("--scene", help="synthetic scene (default: a simulated capture's)")
-    p.add_argument("--scene-points", type=int, help="points of --scene (default: the config's)")
-    p.add_argument("--spacing", type=float, help="point spacing (default: from the cloud)")
-    p.add_argument("--camera-distance", type=float, help="camera distance from the object")
-    p.add_argument("--fov", type=float, help="horizontal field of view, degrees")
-    p.add_argument("--size", type=_size, help="image WIDTHxHEIGHT (default: the images')")
+    p.add_argument("--scene-points", type=count, help="points of --scene (default: the config's)")
+    p.add_argument("--spacing", type=positive, help="point spacing (default: from the cloud)")
+    p.add_argument("--camera-distance", type=positive, help="camera distance from the object")
+    p.add_argument("--fov", type=positive, help="horizontal field of view, degrees")
+    p.add_argument("--size", type=image_size, help="image WIDTHxHEIGHT (default: the images')")
     p.add_argument(
         "--radiance-scale",
-        type=float,
+        type=positive,
         help="decoded value per unit radiance per ms (default: the simulated sensor's, else 1)",
     )
-    p.add_argument("--light-intensity", type=float, default=1.0, help="uncalibrated lights")
+    p.add_argument("--light-intensity", type=positive, default=1.0, help="uncalibrated lights")
     p.add_argument(
         "--ignore-calibration",
         action="store_true",
@@ -59,14 +60,6 @@ def add_process(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
         help="replace a field store already at -o (and the fit saved beside it)",
     )
     p.set_defaults(handler=_run_process)
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
-    return width, height
 
 
 def _sources(args: argparse.Namespace, dataset: Any) -> Any:

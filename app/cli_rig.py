@@ -8,6 +8,8 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from app.cli_args import positive
+
 __all__ = ["add_doctor", "add_sim_start"]
 
 
@@ -36,7 +38,7 @@ def add_doctor(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "non-zero when a device is missing or faulty.",
     )
     p.add_argument("--config", type=Path, required=True, help="rig config (TOML)")
-    p.add_argument("--exposure-ms", type=float, default=10.0, help="test frame exposure")
+    p.add_argument("--exposure-ms", type=positive, default=10.0, help="test frame exposure")
     p.set_defaults(handler=_run_doctor)
 
 

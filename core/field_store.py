@@ -26,7 +26,6 @@ with its distance), ``provenance`` (free-form dict: scene, tool, creation time..
 
 from __future__ import annotations
 
-import hashlib
 import os
 import shutil
 from collections import OrderedDict
@@ -37,9 +36,17 @@ from typing import Any
 import numpy as np
 import zarr
 from numpy.typing import NDArray
+from zarr.core.array_spec import ArrayConfigParams
 
 from core.camera_model import PinholeCamera
 from core.errors import DatasetError, InputError
+from core.field_integrity import (
+    non_finite,
+    radiance_digest,
+    read_checked,
+    require_complete,
+    slab_digest,
+)
 
 __all__ = [
     "CACHED_SLABS",
@@ -47,6 +54,7 @@ __all__ = [
     "FieldStoreWriter",
     "ReflectanceField",
     "companion_paths",
+    "is_field_store",
 ]
 
 FIELD_SCHEMA_VERSION = 1
@@ -61,7 +69,9 @@ def companion_paths(store: str | os.PathLike[str]) -> list[Path]:
     return [path.with_name(path.name + ".models.npz")]
 
 
-def _is_store(path: Path) -> bool:
+def is_field_store(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is a Zarr store (a field store's directory), by its metadata file."""
+    path = Path(path)
     return (path / "zarr.json").is_file() or (path / ".zgroup").is_file()
 
 
@@ -133,12 +143,19 @@ class FieldStoreWriter:
         except Exception as error:  # zarr raises several types for unwritable paths
             raise DatasetError(f"{path}: cannot create the field store: {error}") from error
         self._slab_digests: dict[tuple[int, int], bytes] = {}
+        self._camera_peaks = np.zeros(s)
+        self._visibility_written: set[int] = set()
+        # Every chunk is written, even one equal to the fill value (a black image, a camera
+        # that sees nothing): a chunk that is not there is damage, never data.
+        every_chunk: ArrayConfigParams = {"write_empty_chunks": True}
         self.radiance = self.group.create_array(
-            "radiance", shape=(s, t, p, 3), chunks=(1, 1, p, 3), dtype=dtype, fill_value=0.0
-        )
+            "radiance", shape=(s, t, p, 3), chunks=(1, 1, p, 3), dtype=dtype, fill_value=0.0,
+            config=every_chunk,
+        )  # fmt: skip
         self.visibility = self.group.create_array(
-            "visibility", shape=(s, p), chunks=(1, p), dtype="bool", fill_value=False
-        )
+            "visibility", shape=(s, p), chunks=(1, p), dtype="bool", fill_value=False,
+            config=every_chunk,
+        )  # fmt: skip
         constants: dict[str, NDArray[Any]] = {
             "light_directions": np.asarray(light_directions, dtype=np.float64),
             "camera_directions": np.array([c.direction for c in cameras], dtype=np.float64),
@@ -148,7 +165,9 @@ class FieldStoreWriter:
         if normals is not None:
             constants["normals"] = np.asarray(normals, dtype=np.float32)
         for name, values in constants.items():
-            self.group.create_array(name, shape=values.shape, dtype=values.dtype)[...] = values
+            self.group.create_array(
+                name, shape=values.shape, dtype=values.dtype, config=every_chunk
+            )[...] = values
         self.group.attrs.update(
             {
                 "schema_version": FIELD_SCHEMA_VERSION,
@@ -160,37 +179,63 @@ class FieldStoreWriter:
         )
 
     def write_slab(self, camera: int, light: int, radiance: NDArray[np.floating]) -> None:
-        """Store the radiance (P, 3) of every sample for one camera and one light."""
-        values = np.ascontiguousarray(radiance, dtype=self.radiance.dtype)
-        self.radiance[camera, light] = values
-        self._slab_digests[camera, light] = hashlib.sha256(values.tobytes()).digest()
-
-    def write_visibility(self, camera: int, visible: NDArray[np.bool_]) -> None:
-        """Store which samples (P,) camera ``camera`` sees."""
-        self.visibility[camera] = np.asarray(visible, dtype=bool)
-
-    def finish(self) -> Path:
-        """Check every slab was written, record the digest and put the store at its path.
+        """Store the radiance (P, 3) of every sample for one camera and one light.
 
         Raises
         ------
         DatasetError
-            A slab was never written (named); the partial store is removed.
+            The slab holds NaN or infinity (or overflows the store's dtype): named by count
+            and first sample; nothing is stored.
+        """
+        with np.errstate(over="ignore"):  # an overflow becomes infinity, refused below
+            values = np.ascontiguousarray(radiance, dtype=self.radiance.dtype)
+        found = non_finite(values)
+        if found is not None:
+            raise DatasetError(
+                f"{self.path}: camera {camera} light {light}: {found[0]} radiance values are "
+                f"NaN or infinite in {self.radiance.dtype} (the first at sample {found[1][0]}); "
+                "the store keeps finite light only: check the images and calibration"
+            )
+        self.radiance[camera, light] = values
+        self._slab_digests[camera, light] = slab_digest(values)
+        if values.size:
+            self._camera_peaks[camera] = max(self._camera_peaks[camera], float(values.max()))
+
+    def write_visibility(self, camera: int, visible: NDArray[np.bool_]) -> None:
+        """Store which samples (P,) camera ``camera`` sees."""
+        seen = np.asarray(visible, dtype=bool)
+        self.visibility[camera] = seen
+        self._visibility_written.add(camera)
+        if not seen.any():
+            self._camera_peaks[camera] = -1.0  # sees nothing: dark whatever its slabs hold
+
+    def finish(self) -> Path:
+        """Check every slab was written, record the digest and put the store at its path.
+
+        Also records ``dark_cameras``: the cameras that see nothing or recorded no light
+        under any light (a lens cap, a dead cable), so the guards need not read the store.
+
+        Raises
+        ------
+        DatasetError
+            A slab or a camera's visibility was never written (named); the partial store is
+            removed.
         """
         s_count, t_count = self.radiance.shape[:2]
-        missing = [(s, t) for s in range(s_count) for t in range(t_count)
+        missing = [f"camera {s} light {t}" for s in range(s_count) for t in range(t_count)
                    if (s, t) not in self._slab_digests]  # fmt: skip
+        missing += [f"the visibility of camera {s}" for s in range(s_count)
+                    if s not in self._visibility_written]  # fmt: skip
         if missing:
             self.abort()
-            listed = ", ".join(f"camera {s} light {t}" for s, t in missing[:5])
             raise DatasetError(
-                f"{self.path}: {len(missing)} slabs were never written ({listed}"
+                f"{self.path}: {len(missing)} slabs were never written ({', '.join(missing[:5])}"
                 f"{', ...' if len(missing) > 5 else ''}); the store was not made"
             )
-        digest = hashlib.sha256()
-        for key in sorted(self._slab_digests):
-            digest.update(self._slab_digests[key])
-        self.group.attrs["radiance_digest"] = digest.hexdigest()
+        self.group.attrs["dark_cameras"] = [int(s) for s in np.flatnonzero(self._camera_peaks <= 0)]
+        self.group.attrs["radiance_digest"] = radiance_digest(
+            self._slab_digests[key] for key in sorted(self._slab_digests)
+        )
         _check_target(self.path, self.overwrite)
         if self.path.exists():
             shutil.rmtree(self.path)
@@ -207,11 +252,11 @@ class FieldStoreWriter:
 def _check_target(path: Path, overwrite: bool) -> None:
     if not path.exists():
         return
-    if not path.is_dir() or not (_is_store(path) or not any(path.iterdir())):
+    if not path.is_dir() or not (is_field_store(path) or not any(path.iterdir())):
         raise InputError(
             f"{path}: exists and is not a field store or an empty folder; choose another path"
         )
-    if _is_store(path) and not overwrite:
+    if is_field_store(path) and not overwrite:
         raise InputError(
             f"{path}: a field store is already there; choose another path, or replace it "
             "(--overwrite), which also removes the model fit saved beside it"
@@ -243,6 +288,8 @@ class ReflectanceField:
     light_model, provenance : dict, the store's attributes
     radiance_digest : str or None, the SHA-256 the writer recorded over the radiance (None for
         stores written before it was recorded, and for in-memory subsets)
+    dark_cameras : tuple of int or None, the cameras the writer found to record no light
+        (None when not recorded: older stores, in-memory subsets)
     """
 
     path: Path
@@ -257,6 +304,7 @@ class ReflectanceField:
     provenance: dict[str, Any]
     radiance: Any = field(repr=False)  # the zarr array (S, T, P, 3), read on demand
     radiance_digest: str | None = None
+    dark_cameras: tuple[int, ...] | None = None
     cached_slabs: int = CACHED_SLABS
     _slabs: OrderedDict[int, NDArray[np.float32]] = field(default_factory=OrderedDict, repr=False)
 
@@ -283,6 +331,8 @@ class ReflectanceField:
         for required in ("radiance", "visibility", "light_directions", "camera_directions"):
             if required not in names:
                 raise DatasetError(f"{where}: the field store has no {required!r} array")
+        for name in sorted(names):
+            require_complete(where, group[name])
         radiance = group["radiance"]
         if len(radiance.shape) != 4 or radiance.shape[3] != 3:
             raise DatasetError(f"{where}: radiance must be (S, T, P, 3), got {radiance.shape}")
@@ -297,7 +347,7 @@ class ReflectanceField:
         def read(name: str, shape: tuple[int, ...]) -> NDArray[Any] | None:
             if name not in names:
                 return None
-            values = np.asarray(group[name][...])
+            values = read_checked(where, group[name])
             if values.shape != shape:
                 raise DatasetError(f"{where}: {name} has shape {values.shape}, expected {shape}")
             return values
@@ -318,6 +368,7 @@ class ReflectanceField:
             raise DatasetError(f"{where}: {len(cameras)} camera records for S = {s}")
         assert light_directions is not None and camera_directions is not None
         assert visibility is not None
+        dark = attrs.get("dark_cameras")
         return cls(
             path=where,
             light_directions=light_directions.astype(np.float64),
@@ -331,6 +382,7 @@ class ReflectanceField:
             provenance=dict(attrs.get("provenance", {})),
             radiance=radiance,
             radiance_digest=attrs.get("radiance_digest"),
+            dark_cameras=None if dark is None else tuple(int(c) for c in dark),
             cached_slabs=cached_slabs,
         )
 
@@ -361,15 +413,33 @@ class ReflectanceField:
             raise InputError(f"camera index {camera} outside 0..{s - 1} of {self.path}")
         slab = self._slabs.pop(camera, None)
         if slab is None:
-            slab = np.asarray(self.radiance[camera], dtype=np.float32)
+            slab = self.camera_radiance(camera).astype(np.float32)
         self._slabs[camera] = slab
         while len(self._slabs) > max(self.cached_slabs, 1):
             self._slabs.popitem(last=False)
         return slab
 
+    def camera_radiance(self, camera: int, samples: slice = slice(None)) -> NDArray[np.floating]:
+        """Radiance (T, P', 3) of ``samples`` seen by ``camera``, in the storage dtype, uncached.
+
+        Read through :mod:`core.field_integrity`: a chunk that does not decode, and NaN or
+        infinity, are errors naming the store, camera, light and sample.
+        """
+        values = read_checked(self.path, self.radiance, (camera, slice(None), samples))
+        offset = samples.indices(self.shape[2])[0]
+        found = non_finite(values)
+        if found is not None:
+            light, sample = found[1][0], found[1][1] + offset
+            raise DatasetError(
+                f"{self.path}: {found[0]} non-finite radiance values (NaN or infinity) seen by "
+                f"camera {camera}, the first at light {light}, sample {sample}: radiance "
+                "cannot be NaN; rebuild the store from its source"
+            )
+        return values
+
     def load(self) -> NDArray[np.floating]:
         """The whole radiance array (S, T, P, 3) in memory, in its storage dtype."""
-        return np.asarray(self.radiance[...])
+        return np.stack([self.camera_radiance(s) for s in range(self.shape[0])])
 
     def subset(
         self,

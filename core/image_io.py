@@ -98,6 +98,8 @@ def read_pixels(path: str | os.PathLike[str]) -> NDArray[Any]:
         raise ImageFileError(
             f"{file}: unknown image format {suffix!r}; use one of {sorted(READABLE_SUFFIXES)}"
         )
+    if file.is_dir():
+        raise ImageFileError(f"{file}: is a directory, not an image file")
     if not file.is_file():
         raise ImageFileError(f"{file}: no such file")
     if file.stat().st_size == 0:

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.camera_model import PinholeCamera
+from core.errors import InputError
 
 __all__ = [
     "DEPTH_TOLERANCE",
@@ -71,11 +72,24 @@ def camera_splats(
 ) -> CameraSplats:
     """Project points (P, 3) with normals (P, 3) spaced ``spacing`` apart as splats.
 
+    Raises :class:`~core.errors.InputError` when the camera stands within the points'
+    bounding sphere (about the rig's origin, where the object stands).
+
     A splat is one point spacing wide, or MIN_RADIUS_PX when points are denser than pixels;
     the depth tolerance follows the splat's size in the scene (not only the spacing), so the
     points one small splat covers on a steep surface near the silhouette still blend.
     """
     cloud = np.asarray(points, dtype=np.float64)
+    if len(cloud) == 0:
+        raise InputError("the object has no points")
+    # Inside the object's bounding sphere a camera sees the surface from behind or not at all:
+    # the picture would be black, not an error.
+    bounding = float(np.sqrt(np.max(np.einsum("pk,pk->p", cloud, cloud))))
+    if camera.distance <= bounding:
+        raise InputError(
+            f"camera distance {camera.distance:g} is inside the object (bounding radius "
+            f"{bounding:.3g}); move the camera further out (--distance)"
+        )
     cols, rows, depth = camera.project(cloud)
     facing = np.einsum("pk,pk->p", np.asarray(normals, np.float64), camera.position - cloud) > 0
     depth = np.where(facing, depth, np.inf)

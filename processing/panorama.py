@@ -10,7 +10,7 @@ OpenEXR library knows, DWAB included) and Radiance ``.hdr``; write one with
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -22,6 +22,8 @@ from core.errors import InputError, PanoramaError
 from core.image_io import ImageFileError, Transfer, read_linear
 
 __all__ = [
+    "MAX_RADIANCE",
+    "MIN_HEIGHT",
     "NEGATIVE_TOLERANCE",
     "PANORAMA_SUFFIXES",
     "Panorama",
@@ -33,9 +35,18 @@ __all__ = [
 
 PANORAMA_SUFFIXES = (".exr", ".hdr", ".pic", ".png", ".jpg", ".jpeg")
 
-#: Negative values no larger than this fraction of the mean value are lossy-compression noise
-#: (DWA-compressed EXRs carry some) and are clamped to zero; larger negatives are refused.
+#: Negative values are lossy-compression and stitching noise (DWA-compressed EXRs carry
+#: some, of a few thousandths): they are clamped to zero, and the panorama refused only when
+#: their energy (solid-angle weighted) exceeds this share of its positive light.
 NEGATIVE_TOLERANCE = 1e-3
+
+#: Largest radiance accepted: the relighting sums (radiance x solid angle x reflectance over
+#: thousands of lights, in float32) overflow well before float32's 3.4e38; real skies with a
+#: sun span about 1e-3 .. 1e9.
+MAX_RADIANCE = 1e12
+
+#: Smallest panorama height, pixels (width 2H): fewer rows cannot hold a sky and a ground.
+MIN_HEIGHT = 4
 
 
 @dataclass(frozen=True)
@@ -48,10 +59,27 @@ class Panorama:
         Linear radiance, finite and non-negative, W = 2H.
     source : str
         Where it came from (a file path, or a description for arrays).
+    negative_pixels : int
+        Pixels that held small negative values (compression noise), clamped to zero.
+    negative_share : float
+        Their energy as a share of the positive light (solid-angle weighted).
     """
 
     rgb: NDArray[np.float32]
     source: str
+    negative_pixels: int = 0
+    negative_share: float = 0.0
+
+    @property
+    def note(self) -> str | None:
+        """One line about what reading changed (negative pixels clamped), or None."""
+        if not self.negative_pixels:
+            return None
+        return (
+            f"note: {self.source}: {self.negative_pixels} pixels with small negative values "
+            f"(lossy compression or stitching) clamped to zero, {self.negative_share:.2g} of "
+            "the light"
+        )
 
     @property
     def height(self) -> int:
@@ -80,8 +108,13 @@ def panorama_from_array(
     image = np.asarray(rgb)
     if image.ndim == 2:
         image = np.repeat(image[:, :, None], 3, axis=2)
-    if image.ndim != 3 or image.shape[2] not in (3, 4) or min(image.shape[:2]) < 2:
+    if image.ndim != 3 or image.shape[2] not in (3, 4):
         raise PanoramaError(f"{source}: expected an (H, W, 3) RGB image, got shape {image.shape}")
+    if image.shape[0] < MIN_HEIGHT:
+        raise PanoramaError(
+            f"{source}: {image.shape[1]}x{image.shape[0]} pixels is too small for an "
+            f"environment; a panorama needs at least {2 * MIN_HEIGHT}x{MIN_HEIGHT}"
+        )
     image = np.ascontiguousarray(image[:, :, :3], dtype=np.float32)
     height, width = image.shape[:2]
     if width != 2 * height:
@@ -98,18 +131,38 @@ def panorama_from_array(
         raise PanoramaError(
             f"{source}: {count} NaN or infinite values (first at row {row}, col {col})"
         )
-    lowest = float(image.min())
-    if lowest < 0.0:
-        if lowest < -NEGATIVE_TOLERANCE * float(np.abs(image).mean()):
+    highest = float(image.max())
+    if highest > MAX_RADIANCE:
+        positive = image[image > 0]
+        raise PanoramaError(
+            f"{source}: radiance up to {highest:.3g} (dynamic range {highest / positive.min():.3g}"
+            f" : 1); values above {MAX_RADIANCE:g} overflow the relighting sums: check the "
+            "file's units, or scale it down before use"
+        )
+    negative_pixels, negative_share = 0, 0.0
+    if float(image.min()) < 0.0:
+        weight = panorama_solid_angles(image.shape[0], image.shape[1])[:, :, None]
+        negative = float((np.minimum(image, 0.0) * weight).sum())
+        light = float((np.maximum(image, 0.0) * weight).sum())
+        negative_share = -negative / light if light > 0 else float("inf")
+        negative_pixels = int((image < 0).any(axis=2).sum())
+        if negative_share > NEGATIVE_TOLERANCE:
             row, col, _ = np.unravel_index(int(np.argmin(image)), image.shape)
             raise PanoramaError(
-                f"{source}: negative radiance {lowest:.4g} at row {row}, col {col}; "
-                "light cannot be negative"
+                f"{source}: {negative_pixels} pixels hold negative radiance (lowest "
+                f"{float(image.min()):.4g} at row {row}, col {col}), {negative_share:.2g} of "
+                f"the light, more than compression noise ({NEGATIVE_TOLERANCE:g}): light "
+                "cannot be negative; check how the panorama was made"
             )
         image = np.maximum(image, np.float32(0.0))
     if not image.any():
         raise PanoramaError(f"{source}: the panorama holds no light (every pixel is zero)")
-    return Panorama(rgb=np.asarray(image, dtype=np.float32), source=source)
+    return Panorama(
+        rgb=np.asarray(image, dtype=np.float32),
+        source=source,
+        negative_pixels=negative_pixels,
+        negative_share=negative_share,
+    )
 
 
 def read_panorama(
@@ -166,8 +219,14 @@ def adjust_panorama(panorama: Panorama, *, yaw_deg: float = 0.0, exposure: float
     if yaw_deg % 360.0 != 0.0:
         rgb = rotate_panorama_yaw(rgb, yaw_deg)
     if exposure != 1.0:
+        if float(panorama.rgb.max()) * exposure > MAX_RADIANCE:
+            raise PanoramaError(
+                f"{panorama.source}: exposure {exposure:g} takes its radiance to "
+                f"{float(panorama.rgb.max()) * exposure:.3g}, above {MAX_RADIANCE:g} (the "
+                "relighting sums would overflow); choose a smaller exposure"
+            )
         rgb = rgb * np.float32(exposure)
-    return Panorama(rgb=np.ascontiguousarray(rgb, dtype=np.float32), source=panorama.source)
+    return replace(panorama, rgb=np.ascontiguousarray(rgb, dtype=np.float32))
 
 
 def downsample_panorama(rgb: NDArray[np.floating], height: int) -> NDArray[np.float32]:

@@ -415,14 +415,13 @@ def noisy_capture_warning(models: SampleModels) -> RelightWarning | None:
 def empty_cameras(field: ReflectanceField, cameras: Sequence[int] | None = None) -> list[int]:
     """Cameras (of ``cameras``, default all) whose visible samples are black under every light.
 
-    A camera pose whose images were never written (an interrupted processing run leaves the
-    store's fill value, 0) or whose pose pointed away from the object. A store whose every
-    chunk was written is skipped without reading (zarr stores no all-zero chunk).
+    A camera whose images recorded nothing (a lens cap, a dead cable) or whose pose pointed
+    away from the object. The store's writer records them (``dark_cameras``); only stores
+    without that record (older ones, in-memory subsets) are read.
     """
     chosen = list(range(field.shape[0]) if cameras is None else cameras)
-    initialized = getattr(field.radiance, "nchunks_initialized", None)
-    if initialized is not None and initialized == field.radiance.nchunks:
-        return []
+    if field.dark_cameras is not None:
+        return [int(s) for s in chosen if int(s) in field.dark_cameras]
     empty = []
     for s in chosen:
         seen = field.visibility[s]

@@ -32,9 +32,16 @@ GANTRY_SETTINGS: dict[int, float] = {110: 360_000.0, 111: 360_000.0, 112: 360_00
 
 
 def simulated_capture_config(
-    scene: str, *, size: int = 128, points: int = 20_000, speed: float = 1.0
+    scene: str,
+    *,
+    size: int | tuple[int, int] = 128,
+    points: int = 20_000,
+    speed: float = 1.0,
 ) -> RigConfig:
-    """The simulated rig's config for a capture: the scene, image size and axis speeds."""
+    """The simulated rig's config for a capture: the scene, image size and axis speeds.
+
+    ``size`` is the image's side, or its (width, height), in pixels.
+    """
     if not speed > 0:
         raise InputError(f"the axis speed factor must be positive, got {speed}")
     base = simulated_config(IN_PROCESS_PORT, IN_PROCESS_PORT, scene=scene)
@@ -48,7 +55,8 @@ def simulated_capture_config(
         for role, axis in base.axes.items()
     }
     assert isinstance(base.camera, SimulatedCameraConfig)
-    camera = dataclasses.replace(base.camera, width=size, height=size, points=points)
+    width, height = (size, size) if isinstance(size, int) else size
+    camera = dataclasses.replace(base.camera, width=width, height=height, points=points)
     return dataclasses.replace(base, axes=axes, camera=camera)
 
 

@@ -224,7 +224,7 @@ def render_under_light(
     samples: SurfaceSamples, camera: PinholeCamera, light: Light, *, shadows: bool = True
 ) -> SyntheticImage:
     """Render one image of ``samples`` seen by ``camera`` under ``light``."""
-    _check_camera(samples, camera)
+    _check_camera(samples, camera)  # before the shading (camera_splats checks only after)
     return image_of_points(
         samples, camera, shade_points(samples, camera.position, light, shadows=shadows)
     )
@@ -242,7 +242,6 @@ def _check_camera(samples: SurfaceSamples, camera: PinholeCamera) -> None:
 
 def camera_visibility(samples: SurfaceSamples, camera: PinholeCamera) -> NDArray[np.bool_]:
     """Which points (P,) the camera sees: facing it and blending into at least one pixel."""
-    _check_camera(samples, camera)
     splats = camera_splats(samples.points, samples.normals, camera, samples.spacing)
     return shown_points(
         splats.cols, splats.rows, splats.depth, splats.radius, splats.buffer, splats.tolerance
@@ -253,7 +252,6 @@ def image_of_points(
     samples: SurfaceSamples, camera: PinholeCamera, radiance: NDArray[np.floating]
 ) -> SyntheticImage:
     """Splat points of known radiance (P, 3) into the camera's image, with visibility."""
-    _check_camera(samples, camera)
     s = camera_splats(samples.points, samples.normals, camera, samples.spacing)
     visible = shown_points(s.cols, s.rows, s.depth, s.radius, s.buffer, s.tolerance)
     colours = np.asarray(radiance, dtype=np.float64)

@@ -272,7 +272,7 @@ def _sample_major(field: ReflectanceField, memory_bytes: int) -> NDArray[Any] | 
         return None
     out = np.empty((p_count, s_count, t_count, 3), dtype=field.dtype)
     for s in range(s_count):
-        out[:, s] = np.asarray(field.radiance[s]).transpose(1, 0, 2)
+        out[:, s] = field.camera_radiance(s).transpose(1, 0, 2)
     return out
 
 
@@ -289,6 +289,5 @@ def _read_chunk(
     s_count, t_count, _ = field.shape
     out = np.empty((stop - start, s_count, t_count, 3), dtype=np.float32)
     for s in range(s_count):
-        slab = np.asarray(field.radiance[s, :, start:stop, :], dtype=np.float32)
-        out[:, s] = slab.transpose(1, 0, 2)
+        out[:, s] = field.camera_radiance(s, slice(start, stop)).transpose(1, 0, 2)
     return out

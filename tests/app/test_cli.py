@@ -1,6 +1,5 @@
 from __future__ import annotations
 
-import contextlib
 import json
 from pathlib import Path
 
@@ -110,8 +109,7 @@ def test_relight_refuses_bad_requests(
         "-o",
         str(tmp_path / "a.png"),
     ]
-    with contextlib.suppress(SystemExit):
-        assert main(args + extra) == 2
+    assert main(args + extra) == 2
     assert message in capsys.readouterr().err
 
 

@@ -524,7 +524,7 @@ def confined(tmp_path_factory: pytest.TempPathFactory) -> Dataset:
     return dataset
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=150)
 @given(parts=st.lists(_SEGMENTS, min_size=1, max_size=6), absolute=st.booleans())
 def test_resolve_never_leaves_the_dataset(
     confined: Dataset, parts: list[str], absolute: bool

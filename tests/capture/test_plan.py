@@ -466,7 +466,7 @@ def _axis(
 angles = st.tuples(st.floats(0.0, 359.0, allow_nan=False), st.floats(0.0, 90.0, allow_nan=False))
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(
     cameras=st.lists(angles, min_size=1, max_size=4),
     lights=st.lists(angles, min_size=1, max_size=7),

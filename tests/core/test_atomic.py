@@ -111,9 +111,7 @@ json_values = st.recursive(
 )
 
 
-@settings(
-    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
-)
+@settings(max_examples=60, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(document=json_values)
 def test_write_json_atomic_round_trips(tmp_path: Path, document: Any) -> None:
     target = tmp_path / "round-trip.json"

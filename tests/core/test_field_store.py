@@ -79,10 +79,12 @@ def test_a_store_is_put_in_place_only_when_complete(tmp_path: Path) -> None:
     first = writer()
     first.write_slab(0, 0, np.ones((6, 3)))
     assert not (tmp_path / "f.zarr").exists()  # nothing under the real name while writing
-    with pytest.raises(DatasetError, match=r"1 slabs were never written.*camera 0 light 1"):
+    with pytest.raises(DatasetError, match=r"2 slabs were never written \(camera 0 light 1, "
+                       r"the visibility of camera 0\)"):  # fmt: skip
         first.finish()
     assert not list(tmp_path.iterdir())  # the partial store went too
     second = writer()
+    second.write_visibility(0, np.ones(6, dtype=bool))
     for t in range(2):
         second.write_slab(0, t, np.full((6, 3), t + 1.0))
     second.finish()

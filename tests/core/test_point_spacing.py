@@ -125,7 +125,7 @@ def test_the_estimate_is_deterministic_for_a_seed() -> None:
     assert point_spacing(cloud, sample=1000, seed=0) == point_spacing(cloud, sample=5000, seed=9)
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=30)
 @given(seed=st.integers(0, 2**32 - 1), exponent=st.integers(-12, 12), count=st.integers(2, 300))
 def test_scaling_a_cloud_scales_both_estimates(seed: int, exponent: int, count: int) -> None:
     cloud = np.random.default_rng(seed).normal(size=(count, 3))

@@ -36,7 +36,7 @@ def test_deterministic_per_seed_and_seed_matters() -> None:
     assert (a != halftone(image, seed=4)).any()
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=25)
 @given(st.integers(0, 2**31), st.sampled_from(DIFFUSION_METHODS))
 def test_zero_input_never_fires(seed: int, method: str) -> None:
     rng = np.random.default_rng(seed)

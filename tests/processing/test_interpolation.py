@@ -81,7 +81,7 @@ def test_empty_queries_give_empty_weights() -> None:
     assert w.indices.shape == (0, 3) and w.outside.shape == (0,)
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=25)
 @given(st.integers(3, 80), st.integers(0, 2**32 - 1), st.sampled_from(METHODS))
 def test_random_sets_give_a_partition_of_unity(count: int, seed: int, method: str) -> None:
     rng = np.random.default_rng(seed)

@@ -15,7 +15,7 @@ def _directions(k: int, seed: int) -> np.ndarray:
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=30)
 @given(st.integers(1, 200), st.integers(0, 2**32 - 1), st.integers(2, 40))
 def test_energy_is_conserved(k: int, seed: int, h: int) -> None:
     rng = np.random.default_rng(seed)

@@ -104,3 +104,55 @@ def test_adjust_rotates_and_scales() -> None:
     np.testing.assert_allclose(q.rgb.sum(), 2 * p.rgb.sum(), rtol=1e-5)
     with pytest.raises(PanoramaError, match="exposure"):
         adjust_panorama(p, exposure=0.0)
+
+
+def test_compression_noise_is_clamped_with_a_note(tmp_path: Path) -> None:
+    # A dim interior: the old per-pixel rule refused -0.0022 against a mean of 0.05.
+    image = _image() * 0.05
+    image[[2, 5, 9], [3, 7, 11], 0] = -0.0022
+    p = panorama_from_array(image, source="dim.exr")
+    assert p.rgb.min() == 0.0 and p.negative_pixels == 3
+    assert 0 < p.negative_share < 1e-3
+    assert p.note is not None and "3 pixels with small negative values" in p.note
+    assert panorama_from_array(_image()).note is None
+
+
+@pytest.mark.parametrize("compression", ["DWAA_COMPRESSION", "DWAB_COMPRESSION"])
+def test_a_dwa_compressed_panorama_is_read(tmp_path: Path, compression: str) -> None:
+    import OpenEXR
+
+    rng = np.random.default_rng(0)
+    image = np.zeros((64, 128, 3), dtype=np.float32)
+    image[:32] = rng.random((32, 128, 3)) * 0.05
+    image[10:12, 20:22] = 2000.0  # a sun
+    image[40:42, ::3] = 5.0  # sharp edges ring below zero in DWA's DCT
+    header = {"compression": getattr(OpenEXR, compression), "type": OpenEXR.scanlineimage}
+    path = tmp_path / "dwa.exr"
+    with OpenEXR.File(header, {"RGB": image.astype(np.float16)}) as exr:
+        exr.write(str(path))
+    with OpenEXR.File(str(path)) as exr:
+        assert exr.channels()["RGB"].pixels.min() < 0  # the file really holds negatives
+    p = read_panorama(path)
+    assert p.rgb.min() == 0.0 and p.negative_pixels > 0 and p.note is not None
+
+
+def test_material_negative_light_is_refused_naming_its_share() -> None:
+    image = _image()
+    image[:4] = -0.5
+    with pytest.raises(PanoramaError, match=r"pixels hold negative radiance .* of the light, "
+                       r"more than compression noise \(0\.001\)"):  # fmt: skip
+        panorama_from_array(image, source="x.exr")
+
+
+def test_overflowing_radiance_and_tiny_images_are_refused(tmp_path: Path) -> None:
+    image = _image()
+    image[0, 0] = 1e30
+    with pytest.raises(PanoramaError, match=r"radiance up to 1e\+30 \(dynamic range"):
+        panorama_from_array(image, source="x.exr")
+    with pytest.raises(PanoramaError, match="exposure 1e\\+20 takes its radiance to"):
+        adjust_panorama(panorama_from_array(_image()), exposure=1e20)
+    with pytest.raises(PanoramaError, match=r"2x1 pixels is too small .* at least 8x4"):
+        panorama_from_array(np.ones((1, 2, 3)), source="x.exr")
+    (tmp_path / "folder.exr").mkdir()
+    with pytest.raises(PanoramaError, match="is a directory, not an image file"):
+        read_panorama(tmp_path / "folder.exr")

@@ -129,9 +129,7 @@ _VECTORS = arrays(
 ).filter(lambda v: float(np.linalg.norm(v)) > 1e-6)
 
 
-@settings(
-    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
-)
+@settings(max_examples=60, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(entries=st.lists(st.tuples(_NAMES, _VECTORS), min_size=1, max_size=8))
 def test_write_then_read_round_trips(tmp_path: Path, entries: list[tuple[str, np.ndarray]]) -> None:
     names = [name for name, _ in entries]
@@ -210,7 +208,7 @@ def test_the_rti_camera_looks_straight_down_with_light_z_as_rig_z() -> None:
     )
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(camera=_CAMERAS, vectors=arrays(np.float64, (5, 3), elements=st.floats(-1, 1)))
 def test_camera_and_rig_frames_are_inverse_rotations(
     camera: PinholeCamera, vectors: np.ndarray
@@ -222,7 +220,7 @@ def test_camera_and_rig_frames_are_inverse_rotations(
     assert camera_to_rig(vectors[0], camera).shape == (3,)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(
     camera=_CAMERAS,
     x=st.floats(0.05, 1.0),

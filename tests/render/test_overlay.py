@@ -86,7 +86,7 @@ label_maps = arrays(np.int32, st.tuples(st.integers(1, 6), st.integers(1, 12)),
                     elements=st.integers(0, 3))  # fmt: skip
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=100)
 @given(labels=label_maps, shift=st.integers(-20, 20), data=st.data())
 def test_borders_turn_with_the_panorama_and_ignore_label_values(
     labels: NDArray[np.int32], shift: int, data: st.DataObject

@@ -101,7 +101,7 @@ def test_tone_map_is_monotone_in_exposure_and_radiance() -> None:
 positive = st.floats(0.0009765625, 1024.0, width=32)
 
 
-@settings(max_examples=50, deadline=None)
+@settings(max_examples=50)
 @given(
     rgb=arrays(np.float32, (4, 6, 3), elements=positive),
     scale=st.floats(1e-3, 1e3),
@@ -114,7 +114,7 @@ def test_auto_exposed_tone_map_ignores_the_overall_scale(
     np.testing.assert_allclose(tone_map(rgb * np.float32(scale)), out, atol=2e-5)
 
 
-@settings(max_examples=50, deadline=None)
+@settings(max_examples=50)
 @given(rgb=arrays(np.float32, (3, 5, 3), elements=st.floats(0.0, 1e6, width=32)))
 def test_tone_map_output_is_display_range(rgb: NDArray[np.float32]) -> None:
     out = tone_map(rgb, exposure=1.0)

@@ -131,7 +131,7 @@ def test_malformed_status_is_refused(line: str) -> None:
 _coords = st.tuples(*[st.floats(-1e4, 1e4, allow_nan=False).map(lambda v: round(v, 3))] * 3)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200)
 @given(
     state=st.sampled_from(["Idle", "Run", "Hold:0", "Hold:1", "Jog", "Alarm", "Door:1", "Home"]),
     machine=st.booleans(),

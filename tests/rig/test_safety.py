@@ -152,7 +152,7 @@ angles = st.floats(-180.0, 180.0, allow_nan=False)
 poses = st.builds(RigPose, angles, st.floats(5.0, 85.0), angles, st.floats(0.0, 80.0))
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(start=poses, end=poses)
 def test_a_safe_path_has_safe_ends_and_check_pose_agrees(start: RigPose, end: RigPose) -> None:
     for pose in (start, end):

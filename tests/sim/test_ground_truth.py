@@ -103,9 +103,9 @@ def test_cli_render_writes_rgb_and_alpha(tmp_path: Path) -> None:
     ("extra", "message"),
     [
         (["--scene", "teapot"], "unknown scene"),
-        (["--fov", "0"], "field of view"),
+        (["--fov", "0"], "argument --fov: must be positive"),
         (["--distance", "0.5"], "inside the object"),
-        (["--points", "0"], "points must be"),
+        (["--points", "0"], "argument --points: must be at least 1"),
     ],
 )
 def test_cli_render_refuses_bad_arguments(

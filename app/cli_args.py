@@ -1,0 +1,141 @@
+"""Argument types of the ``rig`` command line: a bad value is refused as it is parsed.
+
+Each is an ``argparse`` ``type=``: argparse turns its :class:`argparse.ArgumentTypeError`
+into ``rig CMD: error: argument --NAME: MESSAGE`` and exit status 2, before any work (or
+motion) starts. What only the data can tell (``-m`` against the field's lights) is checked
+by the command once it has the data.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+
+__all__ = [
+    "IMAGE_BYTES_PER_PIXEL",
+    "MAX_IMAGE_SIDE",
+    "angles",
+    "count",
+    "finite",
+    "image_size",
+    "non_negative",
+    "positive",
+    "whole",
+]
+
+#: Longest image side accepted (pixels): beyond any camera the rig drives.
+MAX_IMAGE_SIDE = 16384
+
+#: Memory a rendered view needs per pixel, bytes: float32 RGB radiance and image, coverage,
+#: depth buffer, splat lists (a few entries per pixel) and the tone-mapped copy.
+IMAGE_BYTES_PER_PIXEL = 96
+
+
+def _number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def finite(text: str) -> float:
+    """A finite float (not NaN or infinity)."""
+    return _number(text)
+
+
+def positive(text: str) -> float:
+    """A finite float > 0."""
+    value = _number(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {text!r}")
+    return value
+
+
+def non_negative(text: str) -> float:
+    """A finite float >= 0."""
+    value = _number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be zero or positive, got {text!r}")
+    return value
+
+
+def count(text: str) -> int:
+    """An integer >= 1 (lights, cameras, points, frames)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    return value
+
+
+def whole(text: str) -> int:
+    """An integer >= 0 (seeds, grid sizes where 0 means none)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be zero or more, got {text!r}")
+    return value
+
+
+def angles(text: str) -> tuple[float, float]:
+    """``AZ,INCL`` in degrees, both finite."""
+    parts = text.split(",")
+    try:
+        if len(parts) != 2:
+            raise argparse.ArgumentTypeError("")
+        azimuth, inclination = (_number(part) for part in parts)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"expected AZ,INCL in degrees (two finite numbers), got {text!r}"
+        ) from None
+    return azimuth, inclination
+
+
+def image_size(text: str) -> tuple[int, int]:
+    """``WIDTHxHEIGHT`` (or ``N`` for N x N) in pixels, that this machine can hold.
+
+    Refused before anything is allocated: a side of 0 or above :data:`MAX_IMAGE_SIDE`, or
+    a view whose buffers (:data:`IMAGE_BYTES_PER_PIXEL` per pixel) exceed the memory free.
+    """
+    parts = text.lower().split("x")
+    try:
+        width, height = (int(v) for v in (parts * 2 if len(parts) == 1 else parts))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected WIDTHxHEIGHT (e.g. 512x512), got {text!r}"
+        ) from None
+    if min(width, height) < 1:
+        raise argparse.ArgumentTypeError(f"image sides must be at least 1 pixel, got {text!r}")
+    if max(width, height) > MAX_IMAGE_SIDE:
+        raise argparse.ArgumentTypeError(f"{text}: image sides are at most {MAX_IMAGE_SIDE} pixels")
+    need = width * height * IMAGE_BYTES_PER_PIXEL
+    free = _free_memory()
+    if free is not None and need > free:
+        raise argparse.ArgumentTypeError(
+            f"{text}: a view this size needs about {need / 2**30:.1f} GiB, this machine has "
+            f"{free / 2**30:.1f} GiB free; choose a smaller size"
+        )
+    return width, height
+
+
+def _free_memory() -> int | None:
+    """Bytes of memory available now (Linux's MemAvailable), else the physical memory."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as info:
+            for line in info:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
