@@ -15,7 +15,16 @@ from pathlib import Path
 from typing import Any
 
 from app.cli_advise import add_advise
-from app.cli_args import angles, count, finite, image_size, positive, whole
+from app.cli_args import (
+    angles,
+    count,
+    finite,
+    image_size,
+    output_directory,
+    output_file,
+    positive,
+    whole,
+)
 from app.cli_bench import add_bench_parser
 from app.cli_calibrate import add_calibrate
 from app.cli_capture import add_capture
@@ -54,7 +63,7 @@ def _add_sample(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--yaw", type=finite, default=0.0, help="rotate the environment, degrees CCW")
     p.add_argument("--exposure", type=positive, default=1.0, help="radiance scale (default 1)")
     p.add_argument("--resample", action="store_true", help="resize a panorama that is not 2:1")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output directory")
+    p.add_argument("-o", "--output", type=output_directory, required=True, help="output directory")
     p.set_defaults(handler=_run_sample)
 
 
@@ -76,7 +85,7 @@ def _run_sample(args: argparse.Namespace) -> int:
         yaw_deg=args.yaw,
         exposure=args.exposure,
     )
-    lighting = write_lighting_outputs(panorama, controls, args.output)
+    lighting = write_lighting_outputs(panorama, controls, args.output, progress=True)
     lights = lighting.light_set()
     print(
         f"{lights.k} lights ({controls.method}) from {panorama.source} "
@@ -144,7 +153,7 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
         default="splat",
         help="draw the points with our splatter (default) or VTK (pyvista, .png only)",
     )
-    p.add_argument("-o", "--output", type=Path, required=True, help=".exr/.png/.gif/.mp4")
+    p.add_argument("-o", "--output", type=output_file, required=True, help=".exr/.png/.gif/.mp4")
     p.set_defaults(handler=_run_relight)
 
 
@@ -317,7 +326,8 @@ def _add_demo(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
         description="Run the demonstration on the bundled panorama and write pictures and a "
         "report to the output directory.",
     )
-    p.add_argument("-o", "--output", type=Path, default=Path("demo-out"), help="output directory")
+    p.add_argument("-o", "--output", type=output_directory, default=Path("demo-out"),
+                   help="output directory")  # fmt: skip
     p.add_argument("--quick", action="store_true", help="small fields (a smoke test)")
     p.set_defaults(handler=_run_demo)
 
@@ -363,7 +373,7 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         help="pre-filter the panorama into GRID x 2 GRID directions (default 32; error measured "
         "in the docs); 0 = every pixel (exact, slow)",
     )
-    render.add_argument("-o", "--output", type=Path, required=True, help="output .exr")
+    render.add_argument("-o", "--output", type=output_file, required=True, help="output .exr")
     render.set_defaults(handler=_run_sim_render)
 
     photo = sim_commands.add_parser(
@@ -393,7 +403,9 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     )
     photo.add_argument("--seed", type=whole, default=0, help="sensor noise seed (default 0)")
     photo.add_argument("--no-noise", action="store_true", help="expected values, no noise")
-    photo.add_argument("-o", "--output", type=Path, required=True, help=".exr/.png/.jpg/.tif/.dng")
+    photo.add_argument(
+        "-o", "--output", type=output_file, required=True, help=".exr/.png/.jpg/.tif/.dng"
+    )
     photo.set_defaults(handler=_run_sim_photo)
 
     field = sim_commands.add_parser(
@@ -417,7 +429,9 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         action="store_true",
         help="replace a field store already at -o (and the fit saved beside it)",
     )
-    field.add_argument("-o", "--output", type=Path, required=True, help="field store directory")
+    field.add_argument(
+        "-o", "--output", type=output_directory, required=True, help="field store directory"
+    )
     field.set_defaults(handler=_run_sim_field)
 
 

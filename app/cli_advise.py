@@ -11,7 +11,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from app.cli_args import count, positive
+from app.cli_args import count, output_file, positive
 
 if TYPE_CHECKING:
     from render.advisor import Advice
@@ -32,7 +32,7 @@ def add_advise(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("field", type=Path, help="reflectance-field store")
     p.add_argument("--env", type=Path, required=True, help="panorama (EXR, .hdr, PNG/JPEG)")
     add_advisor_options(p)
-    p.add_argument("--json", type=Path, help="also write every prediction here")
+    p.add_argument("--json", type=output_file, help="also write every prediction here")
     p.set_defaults(handler=_run_advise)
 
 

@@ -11,6 +11,9 @@ from __future__ import annotations
 import argparse
 import math
 import os
+from pathlib import Path
+
+from core.atomic import output_problem
 
 __all__ = [
     "IMAGE_BYTES_PER_PIXEL",
@@ -20,7 +23,10 @@ __all__ = [
     "finite",
     "image_size",
     "non_negative",
+    "output_directory",
+    "output_file",
     "positive",
+    "squares",
     "whole",
 ]
 
@@ -139,3 +145,31 @@ def _free_memory() -> int | None:
         return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (ValueError, OSError, AttributeError):
         return None
+
+
+def output_file(text: str) -> Path:
+    """A file path that can be written: not a folder, no file where a parent folder must be."""
+    problem = output_problem(text)
+    if problem is not None:
+        raise argparse.ArgumentTypeError(problem)
+    return Path(text)
+
+
+def output_directory(text: str) -> Path:
+    """A folder path that can be written into: not a file, no file where a parent must be."""
+    problem = output_problem(text, directory=True)
+    if problem is not None:
+        raise argparse.ArgumentTypeError(problem)
+    return Path(text)
+
+
+def squares(text: str) -> tuple[int, int]:
+    """``XxY``: a ChArUco board's squares, at least 2 x 2."""
+    parts = text.lower().split("x")
+    try:
+        x, y = (int(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected squares XxY (e.g. 5x5), got {text!r}") from None
+    if min(x, y) < 2:
+        raise argparse.ArgumentTypeError(f"a ChArUco board needs 2x2 squares or more, got {text!r}")
+    return x, y

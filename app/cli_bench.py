@@ -22,7 +22,7 @@ def add_bench_parser(commands: argparse._SubParsersAction[argparse.ArgumentParse
         "environments with the paper's configuration and each change made to it, sweep K and "
         "the field density, time the capture, field building and the interactive loop, and "
         "write DIR/results.json, charts and DIR/REPORT.md. About 25 minutes on 2 cores the "
-        "first time (fields are cached); --quick takes a few minutes.",
+        "first time, 10 once its fields are cached; --quick takes about 3 minutes.",
     )
     add_arguments(p)
     p.set_defaults(handler=run_bench)

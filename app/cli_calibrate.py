@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import positive
+from app.cli_args import positive, squares
 from core.errors import InputError
 
 __all__ = ["add_calibrate"]
@@ -37,7 +37,7 @@ def add_calibrate(commands: argparse._SubParsersAction[argparse.ArgumentParser])
         default="auto",
         help="from the ChArUco views (auto: with 6 or more), or the nominal camera's",
     )
-    p.add_argument("--board", default="5x5", help="ChArUco squares XxY (default 5x5)")
+    p.add_argument("--board", type=squares, default=(5, 5), help="ChArUco squares XxY (5x5)")
     p.add_argument("--square-length", type=positive, default=0.45, help="scene units (0.45)")
     p.add_argument("--marker-length", type=positive, default=0.33, help="scene units (0.33)")
     p.add_argument("--dictionary", default="DICT_4X4_50", help="ArUco dictionary (DICT_4X4_50)")
@@ -82,10 +82,7 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     from processing.light_falloff import WhiteReference
     from processing.light_probe import MirrorSphere
 
-    try:
-        squares_x, squares_y = (int(v) for v in args.board.lower().split("x"))
-    except ValueError:
-        raise InputError(f"--board must be XxY squares, got {args.board!r}") from None
+    squares_x, squares_y = args.board
     dataset = Dataset.open(args.dataset)
     camera: dict[str, Any] = dict(dataset.rig_config.get("camera") or {})
     light_distance = args.light_distance

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import count, image_size, positive
+from app.cli_args import count, image_size, output_directory, positive
 from capture.calibration_plan import with_calibration_captures
 from core.errors import InputError
 from sim.simulated_rig import simulated_capture_config
@@ -36,7 +36,7 @@ def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
         "(files already taken are verified by checksum, missing or corrupt ones re-taken). "
         "Ctrl-C finishes the current image, parks and stops with status paused.",
     )
-    p.add_argument("-o", "--output", type=Path, help="new dataset directory")
+    p.add_argument("-o", "--output", type=output_directory, help="new dataset directory")
     p.add_argument("--resume", type=Path, metavar="DATASET", help="continue this dataset")
     p.add_argument("--config", type=Path, help="rig config (TOML)")
     p.add_argument("--plan", type=Path, help="sweep plan (TOML)")
@@ -50,7 +50,10 @@ def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
                    help="--sim: image WIDTHxHEIGHT (default 128x128)")  # fmt: skip
     p.add_argument("--points", type=count, default=20_000, help="--sim: scene points (default 20k)")
     p.add_argument(
-        "--exposure-ms", type=positive, default=40.0, help="--sim: exposure (default 40)"
+        "--exposure-ms",
+        type=positive,
+        default=10.0,
+        help="--sim: exposure (default 10: the glossy sphere's highlights do not clip)",
     )
     p.add_argument(
         "--speed",
@@ -86,7 +89,7 @@ def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
         description="Write camera_NNN.lp (light directions in each camera's frame) for RTI tools.",
     )
     e.add_argument("dataset", type=Path)
-    e.add_argument("-o", "--output", type=Path, required=True, help="output directory")
+    e.add_argument("-o", "--output", type=output_directory, required=True, help="output directory")
     e.set_defaults(handler=_run_export_lp)
 
 
@@ -108,6 +111,7 @@ def _run_capture(args: argparse.Namespace) -> int:
     from capture.grid_plan import grid_plan
     from capture.plan import SweepPlan
     from capture.plan_file import load_plan
+    from capture.session import require_same_rig
     from rig.config import load_config, parse_config
 
     if args.resume is not None:
@@ -115,6 +119,7 @@ def _run_capture(args: argparse.Namespace) -> int:
             raise InputError("--resume continues a dataset: drop -o and --plan")
         dataset = Dataset.open(args.resume)
         config = load_config(args.config) if args.config else parse_config(dataset.rig_config)
+        require_same_rig(dataset, config)  # before any port is opened
         plan = SweepPlan.from_dict(dataset.plan)
     else:
         if args.output is None:
@@ -141,6 +146,7 @@ def _run_capture(args: argparse.Namespace) -> int:
             plan=plan.to_dict(),
             planned=plan.planned_keys(config),
         )
+    _say_what_is_left_out(plan, config)
     with dataset.lock:  # before the rig's ports are opened: one capture per dataset
         result = _capture(config, dataset, plan, progress=not args.quiet)
     print(
@@ -150,6 +156,24 @@ def _run_capture(args: argparse.Namespace) -> int:
     if result.reason:
         print(f"reason: {result.reason}")
     return {"success": 0, "paused": INTERRUPTED, "aborted": INTERRUPTED}.get(result.exit_status, 1)
+
+
+def _say_what_is_left_out(plan: Any, config: Any, listed: int = 3) -> None:
+    """Print the captures the plan leaves out on this rig (unsafe pairs, unreachable stops)."""
+    left_out = plan.unplaced(config)
+    if not left_out:
+        return
+    pairs = sum(u.kind == "light" for u in left_out)
+    print(
+        f"left out: {pairs} (camera, light) pairs and {len(left_out) - pairs} other captures "
+        "the rig's limits or forbidden zones do not allow (rig plan lists every one):"
+    )
+    for u in left_out[:listed]:
+        light = "" if u.light_index is None else f", light {u.light_index}"
+        kind = "" if u.kind == "light" else f"{u.kind}: "
+        print(f"  {kind}camera {u.camera_index}{light}: {u.reason}")
+    if len(left_out) > listed:
+        print(f"  ... and {len(left_out) - listed} more")
 
 
 def _capture(config: Any, dataset: Any, plan: Any, *, progress: bool) -> Any:

@@ -40,6 +40,11 @@ def add_plan(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         "object (needs --env; with --config, the suggested plan is dry-run on that rig)",
     )
     p.add_argument("--env", type=Path, help="panorama the object will be relit in (--advise)")
+    p.add_argument(
+        "--all",
+        action="store_true",
+        help=f"list every skipped pair (default: the first {LISTED_SKIPS} and a count)",
+    )
     add_advisor_options(p)
     p.set_defaults(handler=_run_plan)
 
@@ -56,11 +61,21 @@ def format_duration(seconds: float) -> str:
     return f"{minutes} min {secs:02d} s"
 
 
-def plan_report(plan: SweepPlan, config: RigConfig) -> tuple[list[str], bool]:
-    """The report's lines, and whether the plan can run on the rig."""
+#: Skipped pairs listed by default; the rest are counted (``--all`` lists them).
+LISTED_SKIPS = 12
+
+
+def plan_report(
+    plan: SweepPlan, config: RigConfig, *, every_skip: bool = False
+) -> tuple[list[str], bool]:
+    """The report's lines, and whether the plan can run on the rig.
+
+    ``every_skip`` lists every skipped pair; else the first :data:`LISTED_SKIPS` and a count
+    of the others, by reason.
+    """
     from capture.plan import IMAGE_OVERHEAD_S
 
-    estimate = plan.estimate(config)
+    estimate = plan.estimate(config, progress=True)
     exposures = ", ".join(f"{ms:g}" for ms in plan.exposures_ms)
     images = ", ".join(f"{kind} {count}" for kind, count in estimate.images.items())
     lines = [
@@ -71,7 +86,10 @@ def plan_report(plan: SweepPlan, config: RigConfig) -> tuple[list[str], bool]:
     ]
     skipped = plan.skipped(config)
     lines.append(f"skipped pairs: {len(skipped)}")
-    lines += [f"  camera {c}, light {t}: {reason}" for c, t, reason in skipped]
+    shown = skipped if every_skip else skipped[:LISTED_SKIPS]
+    lines += [f"  camera {c}, light {t}: {reason}" for c, t, reason in shown]
+    if len(shown) < len(skipped):
+        lines.append(f"  ... and {len(skipped) - len(shown)} more (--all lists every one)")
     others = [u for u in plan.unplaced(config) if u.kind != "light"]
     if others:
         lines.append(f"other captures left out: {len(others)}")
@@ -92,9 +110,14 @@ def plan_report(plan: SweepPlan, config: RigConfig) -> tuple[list[str], bool]:
         + (f", {settle:g} s light settle per switch)" if settle else ")"),
         f"ordering: {plan.ordering}; motion optimised "
         f"{estimate.motion_by_ordering_s['optimised']:.1f} s vs serpentine "
-        f"{estimate.motion_by_ordering_s['serpentine']:.1f} s: the optimised order saves "
-        f"{estimate.gain_s:.1f} s ({estimate.gain_fraction:.0%} of the serpentine duration, "
-        f"{format_duration(estimate.duration_s('serpentine'))})",
+        f"{estimate.motion_by_ordering_s['serpentine']:.1f} s: "
+        + (
+            f"the optimised order saves {estimate.gain_s:.1f} s ({estimate.gain_fraction:.0%} "
+            f"of the serpentine duration, {format_duration(estimate.duration_s('serpentine'))})"
+            if estimate.gain_s >= 0
+            else "the optimised order moves longer but reaches captures the serpentine one "
+            "leaves out"
+        ),
         "limits:",
     ]
     checks = plan.limit_checks(config)
@@ -128,7 +151,7 @@ def _run_plan(args: argparse.Namespace) -> int:
     config = load_config(args.config)
     plan = load_plan(args.plan)
     print(f"plan {args.plan} on {config.name!r} ({args.config})")
-    lines, runnable = plan_report(plan, config)
+    lines, runnable = plan_report(plan, config, every_skip=args.all)
     print("\n".join(lines))
     return 0 if runnable else 2
 

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import count, image_size, positive
+from app.cli_args import count, image_size, output_directory, positive
 from core.errors import InputError
 
 __all__ = ["add_process"]
@@ -31,7 +31,9 @@ def add_process(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
         "names the scene and the camera.",
     )
     p.add_argument("dataset", type=Path, help="capture dataset directory")
-    p.add_argument("-o", "--output", type=Path, required=True, help="field store directory")
+    p.add_argument(
+        "-o", "--output", type=output_directory, required=True, help="field store directory"
+    )
     source = p.add_mutually_exclusive_group()
     source.add_argument("--points", type=Path, help="the object's point cloud (.ply or .npz)")
     source.add_argument("--scene", help="synthetic scene (default: a simulated capture's)")
@@ -76,6 +78,8 @@ def _sources(args: argparse.Namespace, dataset: Any) -> Any:
             dataset.rig_config, scene=args.scene, points=args.scene_points
         )
     except InputError:
+        if args.scene is not None:
+            raise  # the scene named is unknown: its own message says so
         raise InputError(
             f"{args.dataset}: not a simulated capture; give the object's points with --points "
             f"PLY|NPZ (or a synthetic --scene)"

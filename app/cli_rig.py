@@ -8,7 +8,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import positive
+from app.cli_args import output_file, positive
 
 __all__ = ["add_doctor", "add_sim_start"]
 
@@ -24,7 +24,7 @@ def add_sim_start(sim_commands: argparse._SubParsersAction[argparse.ArgumentPars
         "removes the ptys.",
     )
     p.add_argument("--config", type=Path, help="rig config to emulate (default: a simulated rig)")
-    p.add_argument("--write-config", type=Path, help="write the ready-to-use config here")
+    p.add_argument("--write-config", type=output_file, help="write the ready-to-use config here")
     p.set_defaults(handler=_run_sim_start)
 
 
@@ -42,12 +42,33 @@ def add_doctor(commands: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.set_defaults(handler=_run_doctor)
 
 
+#: First line of a config written by ``rig sim start``: such a file may be replaced by the
+#: next start (its ports change every time); any other file at the path is refused.
+SIM_CONFIG_MARK = "# written by rig sim start; replaced by the next start"
+
+
+def _check_write_config(path: Path) -> None:
+    from core.errors import InputError
+
+    if not path.is_file():
+        return
+    with open(path, encoding="utf-8", errors="replace") as existing:
+        first = existing.readline().rstrip("\n")
+    if first != SIM_CONFIG_MARK:
+        raise InputError(
+            f"{path}: exists and was not written by rig sim start; choose another path for "
+            "the simulated rig's config, or remove that file"
+        )
+
+
 def _run_sim_start(args: argparse.Namespace) -> int:
     from core.atomic import atomic_path
     from rig.config import load_config
     from rig.hardware import Rig
     from sim.simulated_rig import SimulatedRig
 
+    if args.write_config:
+        _check_write_config(args.write_config)
     stop = threading.Event()
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
@@ -58,7 +79,8 @@ def _run_sim_start(args: argparse.Namespace) -> int:
                 pass
             if args.write_config:
                 with atomic_path(args.write_config) as temporary:
-                    temporary.write_text(simulated.config.to_toml(), encoding="utf-8")
+                    text = f"{SIM_CONFIG_MARK}\n{simulated.config.to_toml()}"
+                    temporary.write_text(text, encoding="utf-8")
                 print(f"config: {args.write_config}", flush=True)
             print("simulated rig running; Ctrl-C to stop", flush=True)
             stop.wait()

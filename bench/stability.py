@@ -91,6 +91,9 @@ def in_memory(field: ReflectanceField, radiance: NDArray[np.floating]) -> Reflec
         field,
         path=field.path.with_name(field.path.name + "[changed]"),
         radiance=np.asarray(radiance, dtype=np.float32),
+        # What the writer recorded of the old radiance does not hold for the new one.
+        radiance_digest=None,
+        dark_cameras=None,
         cached_slabs=field.shape[0],
         _slabs=OrderedDict(),
     )

@@ -67,6 +67,7 @@ from bench.suite_results import (
     Row,
     SuiteResults,
 )
+from core.atomic import output_problem
 from core.errors import InputError
 
 __all__ = ["SuiteConfig", "add_arguments", "machine", "main", "run", "run_suite"]
@@ -233,6 +234,10 @@ def run(args: argparse.Namespace) -> int:
     int, the exit status
     """
     out: Path = args.output
+    for path in (out, args.fields):
+        problem = None if path is None else output_problem(path, directory=True)
+        if problem is not None:
+            raise InputError(problem)
     out.mkdir(parents=True, exist_ok=True)
     config = QUICK if args.quick else FULL
     results = run_suite(config, out, args.fields)

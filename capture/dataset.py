@@ -354,12 +354,16 @@ class Dataset:
         VerifyReport
             Names each image not taken, each missing, corrupt or unexpected file.
         """
-        journaled = None
-        if self.journaled:  # the journal as it is now (a run may have added to it)
-            exists = self.journal_path.exists()
-            documents = read_journal(self.journal_path).documents if exists else []
-            journaled = completed_images(documents)
-        return verify_files(self.path, self.records, self.planned, self.image_path, journaled)
+        journaled, torn = None, None
+        if self.journal_path.exists():  # as it is now (a run may have added to it)
+            contents = read_journal(self.journal_path)
+            torn = None if contents.truncated is None else contents.truncated.line
+            if self.journaled:
+                journaled = completed_images(contents.documents)
+        elif self.journaled:
+            journaled = set()
+        report = verify_files(self.path, self.records, self.planned, self.image_path, journaled)
+        return replace(report, torn_journal_line=torn)
 
     def remove_partials(self) -> list[str]:
         """Delete the temporary files a crash left (in ``images/`` and beside the manifest)."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from capture.plan import Angles, SweepPlan
+from capture.plan import Angles, SweepPlan, check_plan_size
 from core.directions import angles_deg_from_direction, hemisphere_layout
 from core.errors import InputError
 
@@ -50,6 +50,7 @@ def grid_plan(
         near-uniform one)
     dark_frames, ordering : as :class:`SweepPlan`
     """
+    check_plan_size(cameras, lights, f"a grid plan of {cameras} x {lights}")
     layout = "fibonacci" if layout == "hemisphere" else layout
     if layout not in LAYOUTS:
         raise InputError(f"unknown layout {layout!r}; use 'grid', 'fibonacci' or 'hemisphere'")

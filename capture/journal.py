@@ -312,13 +312,6 @@ def read_journal(path: str | os.PathLike[str]) -> JournalContents:
         kind = document["type"]
         open_run = document["uid"] if kind == "start" else None if kind == "stop" else open_run
         offset += len(chunk) + 1
-    if truncated is not None:
-        log.warning(
-            "%s, line %d: unfinished last line ignored (a crash): %r",
-            file,
-            truncated.line,
-            truncated.text,
-        )
     return JournalContents(file, documents, lines, truncated)
 
 
@@ -406,6 +399,12 @@ class Journal:
             self.repaired = contents.truncated
             if contents.truncated is not None:
                 os.truncate(self.path, contents.truncated.offset)
+                log.warning(
+                    "%s, line %d: unfinished last line removed (a crash cut it short): %r",
+                    self.path,
+                    contents.truncated.line,
+                    contents.truncated.text,
+                )
         self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
         os.fsync(self._fd)
         if not existed:

@@ -40,6 +40,8 @@ from rig.pose import CAMERA_ROLES, LIGHT_ROLES, ROLES, RigPose
 __all__ = [
     "CALIBRATION_NAME",
     "IMAGE_OVERHEAD_S",
+    "MAX_PAIRS",
+    "MAX_POSES",
     "ORDERINGS",
     "PLAN_SCHEMA_VERSION",
     "CalibrationCapture",
@@ -47,6 +49,7 @@ __all__ = [
     "LimitCheck",
     "PlanEstimate",
     "SweepPlan",
+    "check_plan_size",
     "finite_number",
     "pose_angles",
 ]
@@ -57,6 +60,25 @@ PLAN_SCHEMA_VERSION = 1
 CALIBRATION_NAME = re.compile(r"^[a-z0-9][a-z0-9-]*$")
 
 Angles = tuple[float, float]
+
+#: The most poses a plan's cameras or lights may be, and the most (camera, light) pairs:
+#: checked before poses are expanded (plan files, grid plans), so a typo is refused at once
+#: instead of hanging the dry run. A 100 x 100 sweep is 10 000 pairs; the pair limit is a
+#: month of capture at half a second per image.
+MAX_POSES = 10_000
+MAX_PAIRS = 5_000_000
+
+
+def check_plan_size(cameras: int, lights: int, where: str = "the plan") -> None:
+    """Refuse more than :data:`MAX_POSES` cameras or lights, or :data:`MAX_PAIRS` pairs."""
+    for what, count in (("camera", cameras), ("light", lights)):
+        if count > MAX_POSES:
+            raise InputError(f"{where}: {count} {what} poses; at most {MAX_POSES}")
+    if cameras * lights > MAX_PAIRS:
+        raise InputError(
+            f"{where}: {cameras} cameras x {lights} lights = {cameras * lights} pairs; at most "
+            f"{MAX_PAIRS}"
+        )
 
 
 @dataclass(frozen=True)
@@ -220,6 +242,7 @@ class SweepPlan:
     )
 
     def __post_init__(self) -> None:
+        check_plan_size(len(self.cameras), len(self.lights))
         object.__setattr__(self, "cameras", pose_angles(self.cameras, "cameras"))
         object.__setattr__(self, "lights", pose_angles(self.lights, "lights"))
         object.__setattr__(self, "exposures_ms", _exposures(self.exposures_ms, "plan"))
@@ -246,7 +269,7 @@ class SweepPlan:
 
     # -- the events ------------------------------------------------------------------------
 
-    def _schedules(self, config: RigConfig) -> dict[str, Schedule]:
+    def _schedules(self, config: RigConfig, *, progress: bool = False) -> dict[str, Schedule]:
         cached = self._cache.get(id(config))
         if cached is not None and cached[0] is config:
             return cached[1]
@@ -256,6 +279,7 @@ class SweepPlan:
             self.lights,
             dark_frames=self.dark_frames,
             calibration=[(c.camera_index, c.light_index) for c in self.calibration],
+            progress=progress,
         )
         self._cache.clear()
         self._cache[id(config)] = (config, built)
@@ -305,9 +329,12 @@ class SweepPlan:
 
     # -- the dry run -----------------------------------------------------------------------
 
-    def estimate(self, config: RigConfig) -> PlanEstimate:
-        """Counts, motion, exposure and overhead seconds, in both orderings."""
-        built = self._schedules(config)
+    def estimate(self, config: RigConfig, *, progress: bool = False) -> PlanEstimate:
+        """Counts, motion, exposure and overhead seconds, in both orderings.
+
+        ``progress`` shows a bar when ordering the stops takes more than a second.
+        """
+        built = self._schedules(config, progress=progress)
         events = self._events(built[self.ordering])
         images = dict.fromkeys(IMAGE_KINDS, 0)
         for event in events:

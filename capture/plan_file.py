@@ -18,10 +18,12 @@ from typing import Any
 from capture.grid_plan import LAYOUTS, layout_angles
 from capture.plan import (
     CALIBRATION_NAME,
+    MAX_POSES,
     PLAN_SCHEMA_VERSION,
     Angles,
     CalibrationCapture,
     SweepPlan,
+    check_plan_size,
     finite_number,
     pose_angles,
 )
@@ -139,6 +141,12 @@ def _poses(table: _Table) -> tuple[Angles, ...]:
     if forms[0] == "azimuth_deg":
         azimuths = _axis_values(table, "azimuth_deg")
         inclinations = _axis_values(table, "inclination_deg")
+        if len(azimuths) * len(inclinations) > MAX_POSES:
+            raise ConfigError(
+                f"[{table.path}] gives {len(azimuths) * len(inclinations)} poses "
+                f"({len(azimuths)} azimuths x {len(inclinations)} inclinations); at most "
+                f"{MAX_POSES}: check the steps"
+            )  # before the grid is expanded
         poses: tuple[Angles, ...] = tuple((a, i) for i in inclinations for a in azimuths)
     elif forms[0] == "poses_deg":
         raw = table.value("poses_deg")
@@ -149,8 +157,8 @@ def _poses(table: _Table) -> tuple[Angles, ...]:
     else:
         layout = table.string("layout", choices=LAYOUTS)
         count = table.integer("count")
-        if count < 1:
-            raise ConfigError(f"{table.key('count')} = {count} must be at least 1")
+        if not 1 <= count <= MAX_POSES:
+            raise ConfigError(f"{table.key('count')} = {count} must be in 1..{MAX_POSES}")
         poses = layout_angles(count, layout)
     table.finish()
     return poses
@@ -224,6 +232,7 @@ def parse_plan(data: Mapping[str, Any], source: str | os.PathLike[str] | None = 
         cameras_table, lights_table = root.sub("cameras"), root.sub("lights")
         assert cameras_table is not None and lights_table is not None
         cameras, lights = _poses(cameras_table), _poses(lights_table)
+        check_plan_size(len(cameras), len(lights), "the plan")
         tables = root.subs("calibration")
         plan = SweepPlan(
             cameras=cameras,

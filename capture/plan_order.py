@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from tqdm import tqdm
 
 from rig.config import RigConfig
 from rig.pose import ROLES, RigPose
@@ -344,6 +345,7 @@ class _Safety:
         self.config = config
         self.limit_deg = config.safety.min_separation_deg
         self.fast = not config.safety.forbidden
+        self._checked: dict[tuple[RigPose, RigPose], bool] = {}
         self.bounds = [
             (axis.min_deg, axis.max_deg) if (axis := config.axes.get(role)) else (0.0, 0.0)
             for role in ROLES
@@ -362,7 +364,12 @@ class _Safety:
     def path_ok(self, start: RigPose, end: RigPose) -> bool:
         """Whether the straight move is safe (conservative by 1e-6 degree of separation)."""
         if not self.fast:
-            return path_violation(self.config, start, end) is None
+            # The ordering tries the same moves again and again (each insertion point of
+            # every light): a rig with forbidden boxes samples each move once.
+            known = self._checked.get((start, end))
+            if known is None:
+                known = self._checked[start, end] = path_violation(self.config, start, end) is None
+            return known
         if not (self._inside(start) and self._inside(end)):
             return False
         if self.limit_deg <= 0.0:
@@ -500,6 +507,7 @@ def _build(
     dark_frames: bool,
     calibration: Sequence[tuple[int, int | None]],
     ordering: str,
+    progress: bool,
 ) -> Schedule:
     builder = _Builder(config)
     for index, (c, t) in enumerate(calibration):
@@ -522,7 +530,10 @@ def _build(
         camera_order = list(range(len(cameras)))
     else:
         camera_order = _camera_tour(config, cameras, builder.current)
-    for position, c in enumerate(camera_order):
+    # A bar only when ordering takes a while (thousands of pairs, forbidden boxes to sample).
+    bar = tqdm(camera_order, desc=f"ordering ({ordering})", unit="camera", delay=1.0,
+               disable=not progress)  # fmt: skip
+    for position, c in enumerate(bar):
         if ordering == "serpentine":
             order = allowed[c] if position % 2 == 0 else allowed[c][::-1]
         else:
@@ -544,6 +555,7 @@ def schedules(
     *,
     dark_frames: bool = True,
     calibration: Sequence[tuple[int, int | None]] = (),
+    progress: bool = False,
 ) -> dict[str, Schedule]:
     """The stops of a sweep in each ordering, calibration stops first.
 
@@ -553,6 +565,7 @@ def schedules(
     cameras, lights : sequences of (azimuth_deg, inclination_deg)
     dark_frames : bool, a dark stop (light off) at each camera, before its light stops
     calibration : sequence of (camera index, light index or None for light off), in order
+    progress : bool, show a progress bar when ordering takes more than a second
 
     Returns
     -------
@@ -568,6 +581,7 @@ def schedules(
             dark_frames=dark_frames,
             calibration=calibration,
             ordering=ordering,
+            progress=progress,
         )
         for ordering in ORDERINGS
     }

@@ -53,6 +53,7 @@ __all__ = [
     "SessionResult",
     "SessionState",
     "TargetPlacer",
+    "require_same_rig",
 ]
 
 #: Puts a calibration target (a :class:`capture.plan.CalibrationCapture` name such as
@@ -145,6 +146,30 @@ class SessionResult:
     already_done: int
     retaken: int
     seconds: dict[str, float] = field(default_factory=dict)
+
+
+def require_same_rig(dataset: Dataset, config: RigConfig) -> None:
+    """Refuse to add images made with another rig config to a dataset.
+
+    Checked by the session before it takes an image, and by ``rig capture --resume`` before
+    it opens a port (the other config's devices may not even be there).
+
+    Raises
+    ------
+    DatasetError
+        Naming both configs' digests and the sections that differ.
+    """
+    have = capture_identity(dataset.rig_config)
+    now = capture_identity(config.to_dict())
+    if config_digest(have) == config_digest(now):
+        return
+    differ = sorted(k for k in set(have) | set(now) if have.get(k) != now.get(k))
+    raise DatasetError(
+        f"{dataset.path} was captured with rig config {config_digest(have)[:19]}, this rig's "
+        f"is {config_digest(now)[:19]} ({', '.join(differ)} differ): its images would mix two "
+        "set-ups. Resume with the dataset's own config (drop --config), or capture into a new "
+        "dataset"
+    )
 
 
 class CaptureSession:
@@ -243,18 +268,7 @@ class CaptureSession:
             return self._run()
 
     def _check_same_rig(self) -> None:
-        """Refuse to add images made with another rig config to a dataset."""
-        have = capture_identity(self.dataset.rig_config)
-        now = capture_identity(self.rig.config.to_dict())
-        if config_digest(have) == config_digest(now):
-            return
-        differ = sorted(k for k in set(have) | set(now) if have.get(k) != now.get(k))
-        raise DatasetError(
-            f"{self.dataset.path} was captured with rig config {config_digest(have)[:19]}, "
-            f"this rig's is {config_digest(now)[:19]} ({', '.join(differ)} differ): its images "
-            "would mix two set-ups. Resume with the dataset's own config (drop --config), or "
-            "capture into a new dataset"
-        )
+        require_same_rig(self.dataset, self.rig.config)
 
     def _check_journal_vouches(self) -> None:
         """Refuse a dataset whose images the journal does not vouch for.

@@ -48,6 +48,8 @@ class VerifyReport:
     partials : temporary files a crash left behind (harmless; ``remove_partials`` deletes them)
     unvouched : records of a journaled dataset that its journal does not vouch for (the journal
         was deleted, emptied or cut short): their files cannot be trusted to be this capture's
+    torn_journal_line : the journal's unfinished last line (a crash while writing it), ignored;
+        harmless, and the next resume removes it
     """
 
     path: Path
@@ -59,6 +61,7 @@ class VerifyReport:
     unexpected: tuple[str, ...] = ()
     partials: tuple[str, ...] = ()
     unvouched: tuple[ImageRecord, ...] = ()
+    torn_journal_line: int | None = None
 
     @property
     def complete(self) -> bool:
@@ -101,6 +104,11 @@ class VerifyReport:
             verdict = "intact (completeness unknown: no planned images listed)"
         head = f"{self.path}: {self.checked} images checked, {verdict}"
         notes = [f"leftover temporary file: {name}" for name in self.partials]
+        if self.torn_journal_line is not None:
+            notes.append(
+                f"journal.jsonl line {self.torn_journal_line}: unfinished last line (a crash), "
+                "ignored; rig capture --resume removes it"
+            )
         return "\n".join([head, *(f"  {line}" for line in self.problems() + notes)])
 
 

@@ -9,7 +9,30 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-__all__ = ["atomic_path", "write_json_atomic"]
+from core.errors import InputError
+
+__all__ = ["atomic_path", "output_problem", "write_json_atomic"]
+
+
+def output_problem(path: str | os.PathLike[str], *, directory: bool = False) -> str | None:
+    """Why ``path`` cannot be written as a file (or, with ``directory``, a folder), or None.
+
+    Checked before any work starts, so that a long render or capture does not end in an
+    ``IsADirectoryError``: a folder where a file is wanted (or a file where a folder is), a
+    file standing where a parent folder must be, a parent that cannot be written.
+    """
+    target = Path(path)
+    for parent in reversed(target.parents):
+        if parent.exists() and not parent.is_dir():
+            return f"{target}: {parent} is a file, not a directory"
+    if directory and target.exists() and not target.is_dir():
+        return f"{target}: exists and is a file, not a directory; choose another path"
+    if not directory and target.is_dir():
+        return f"{target}: is a directory; name a file to write"
+    nearest = next((p for p in (target, *target.parents) if p.exists()), Path("."))
+    if not os.access(nearest, os.W_OK):
+        return f"{target}: cannot write in {nearest} (permission denied)"
+    return None
 
 
 @contextlib.contextmanager
@@ -18,16 +41,26 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
 
     The temporary name keeps the suffix, so writers that pick a format by extension (OpenCV,
     OpenEXR) work unchanged. On an exception the temporary file is removed and ``path`` is left
-    as it was.
+    as it was. A path that cannot be written (see :func:`output_problem`) is an
+    :class:`~core.errors.InputError` naming it.
     """
     target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
+    problem = output_problem(target)
+    if problem is not None:
+        raise InputError(problem)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise InputError(f"{target}: cannot create its folder: {error.strerror}") from None
     temporary = target.with_name(f".{target.stem}.{os.getpid()}.partial{target.suffix}")
     try:
         yield temporary
         with open(temporary, "rb+") as handle:
             os.fsync(handle.fileno())
-        os.replace(temporary, target)
+        try:
+            os.replace(temporary, target)
+        except OSError as error:  # a folder made at the target meanwhile, a full disk
+            raise InputError(f"{target}: cannot write: {error.strerror}") from None
     finally:
         temporary.unlink(missing_ok=True)
     # The rename is durable only once the directory entry is on disk.

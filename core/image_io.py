@@ -26,8 +26,13 @@ TIFF             tifffile; strips past the end of the      16-bit linear RGB
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import io
 import os
+import sys
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Literal
 
@@ -177,14 +182,58 @@ def check_tiff_strips(path: str | os.PathLike[str]) -> None:
         raise ImageFileError(f"{file}: corrupt TIFF structure: {error}") from error
 
 
+_LIBC = ctypes.CDLL(None)
+
+
+@contextlib.contextmanager
+def _library_output() -> Iterator[list[str]]:
+    """Collect what C libraries write to the process's stderr (file descriptor 2) meanwhile.
+
+    The OpenEXR library prints its own lines for a corrupt file before its exception (to
+    stderr, and some warnings to stdout): they would precede the tool's one-line message. The
+    lines of both are yielded (filled on exit) so the caller can put them in its error, or
+    pass them on when the read succeeded.
+    """
+    lines: list[str] = []
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = {fd: os.dup(fd) for fd in (1, 2)}
+    said = io.StringIO()  # the bindings also write through Python's sys.stdout
+    with tempfile.TemporaryFile() as sink:
+        for fd in saved:
+            os.dup2(sink.fileno(), fd)
+        try:
+            with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+                yield lines
+        finally:
+            # C++ streams write through C stdio, buffered when not a terminal: flush them
+            # into the sink before the descriptors are restored.
+            _LIBC.fflush(None)
+            for fd, original in saved.items():
+                os.dup2(original, fd)
+                os.close(original)
+            sink.seek(0)
+            lines += sink.read().decode("utf-8", "replace").splitlines()
+            lines += said.getvalue().splitlines()
+
+
 def _read_exr(file: Path) -> NDArray[np.float32]:
-    try:
-        with OpenEXR.File(str(file), separate_channels=True) as exr:
-            channels = {name: channel.pixels for name, channel in exr.channels().items()}
-    except Exception as error:  # the bindings raise RuntimeError or ValueError, by case
+    with _library_output() as printed:
+        try:
+            with OpenEXR.File(str(file), separate_channels=True) as exr:
+                channels = {name: channel.pixels for name, channel in exr.channels().items()}
+        except Exception as error:  # the bindings raise RuntimeError or ValueError, by case
+            failure: Exception | None = error
+        else:
+            failure = None
+    if failure is not None:
+        said = "; ".join(line.strip() for line in printed[:2] if line.strip())
         raise ImageFileError(
-            f"{file}: cannot read as OpenEXR (truncated or corrupt?): {error}"
-        ) from error
+            f"{file}: cannot read as OpenEXR (truncated or corrupt?): {failure}"
+            + (f" ({said})" if said else "")
+        ) from failure
+    for line in printed:
+        print(line, file=sys.stderr)
     names = {name.rsplit(".", 1)[-1]: name for name in channels}  # accept layer prefixes
     if all(c in names for c in "RGB"):
         planes = [channels[names[c]] for c in "RGB"]

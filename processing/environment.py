@@ -201,4 +201,6 @@ def read_modulation_map(path: str | os.PathLike[str]) -> NDArray[np.float32]:
     image = read_linear(path, transfer="linear")
     if not np.all(np.isfinite(image)) or float(image.min()) < 0:
         raise InputError(f"{path}: modulation map values must be finite and non-negative")
+    if not image.any():
+        raise InputError(f"{path}: the modulation map is zero everywhere: it forbids every sample")
     return image

@@ -8,6 +8,8 @@ depth test (:func:`core.splat.camera_splats`) and defaults to
 from __future__ import annotations
 
 import os
+import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,7 +79,8 @@ def read_point_cloud(path: str | os.PathLike[str]) -> PointCloud:
     suffix = file.suffix.lower()
     try:
         if suffix == ".npz":
-            with np.load(file) as data:
+            # Our handle, closed whatever np.load raises (it leaks its own on a bad zip).
+            with open(file, "rb") as handle, np.load(handle, allow_pickle=False) as data:
                 spacing = float(data["spacing"]) if "spacing" in data else None
                 return PointCloud.from_arrays(data["points"], data["normals"], spacing)
         if suffix == ".ply":
@@ -88,8 +91,10 @@ def read_point_cloud(path: str | os.PathLike[str]) -> PointCloud:
             points = np.stack([columns[c] for c in "xyz"], axis=1)
             normals = np.stack([columns[c] for c in ("nx", "ny", "nz")], axis=1)
             return PointCloud.from_arrays(points, normals)
-    except (KeyError, ValueError, OSError, EOFError) as error:
+    except (KeyError, ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as error:
         raise DatasetError(f"{file}: cannot read the point cloud: {error}") from error
+    except (TypeError, AttributeError) as error:  # a bare .npy array saved as .npz
+        raise DatasetError(f"{file}: not an .npz archive of points and normals") from error
     raise DatasetError(f"{file}: point clouds are read from .npz or .ply, not {suffix!r}")
 
 

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import hashlib
 import os
+import zipfile
+import zlib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -111,11 +113,13 @@ def read_sample_models(
     """
     source = Path(path)
     try:
-        archive = np.load(source, allow_pickle=False)
-    except (OSError, ValueError) as error:
+        # Our handle, closed whatever np.load raises (it leaks its own on a bad zip).
+        with open(source, "rb") as handle, np.load(handle, allow_pickle=False) as archive:
+            data = {key: archive[key] for key in archive.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as error:
         raise DatasetError(f"{source}: not a readable models file ({error})") from error
-    with archive:
-        data = {key: archive[key] for key in archive.files}
+    except AttributeError:  # np.load gave a bare array (.npy), which has no files
+        raise DatasetError(f"{source}: not a models file (a single array)") from None
     if "format" not in data or int(data["format"]) != FORMAT_VERSION:
         found = data.get("format")
         raise DatasetError(

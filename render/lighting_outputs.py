@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from tqdm import tqdm
+
 from core.atomic import write_json_atomic
 from core.image_io import write_srgb8
 from processing.environment import EnvironmentLighting, LightingControls, light_environment
@@ -16,21 +18,35 @@ __all__ = ["write_lighting_outputs"]
 
 
 def write_lighting_outputs(
-    panorama: Panorama, controls: LightingControls, directory: str | os.PathLike[str]
+    panorama: Panorama,
+    controls: LightingControls,
+    directory: str | os.PathLike[str],
+    *,
+    progress: bool = False,
 ) -> EnvironmentLighting:
     """Sample and disassemble ``panorama`` and write the three files into ``directory``.
 
     ``overlay.png`` shows the tone-mapped panorama with the Voronoi cell borders and samples;
     ``lights.png`` fills each cell with its light's mean radiance, at the same exposure.
+    ``progress`` shows the steps when they take more than a second (a first run compiles the
+    numerical kernels, which are cached afterwards).
     """
-    lighting = light_environment(panorama, controls)
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
-    exposure = auto_exposure(lighting.panorama.rgb)
-    write_json_atomic(out / "lights.json", lighting.to_json())
-    write_srgb8(
-        out / "overlay.png",
-        sample_overlay(lighting.panorama.rgb, lighting.light_set(), exposure=exposure),
-    )
-    write_srgb8(out / "lights.png", disassembled_picture(lighting.light_set(), exposure=exposure))
+    steps = tqdm(total=3, desc="sample and gather", unit="step", delay=1.0, disable=not progress)
+    with steps:
+        lighting = light_environment(panorama, controls)
+        out = Path(directory)
+        out.mkdir(parents=True, exist_ok=True)
+        exposure = auto_exposure(lighting.panorama.rgb)
+        write_json_atomic(out / "lights.json", lighting.to_json())
+        steps.set_description("overlay.png")
+        steps.update()
+        write_srgb8(
+            out / "overlay.png",
+            sample_overlay(lighting.panorama.rgb, lighting.light_set(), exposure=exposure),
+        )
+        steps.set_description("lights.png")
+        steps.update()
+        picture = disassembled_picture(lighting.light_set(), exposure=exposure)
+        write_srgb8(out / "lights.png", picture)
+        steps.update()
     return lighting

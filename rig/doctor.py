@@ -73,10 +73,17 @@ def run_doctor(rig: Rig, *, exposure_ms: float = 10.0) -> list[DoctorCheck]:
             connected.append(rig.gantry)
     try:
         if len(connected) == len(rig.devices):
-            start = rig.pose()
+            # A device can fall silent after it answered the connect: a failure to read the
+            # start pose is a row of its own, and the rows gathered so far are kept.
+            try:
+                start: RigPose | None = rig.pose()
+            except RigError as error:
+                checks.append(DoctorCheck("rig", "read the pose", False, str(error)))
+                start = None
+            check = f"move {NUDGE_DEG:g} deg and back"
             for role, axis in rig.config.axes.items():
-                device = f"axis {role} ({axis.device})"
-                attempt(device, f"move {NUDGE_DEG:g} deg and back", _nudge(rig, start, role))
+                if start is not None:
+                    attempt(f"axis {role} ({axis.device})", check, _nudge(rig, start, role))
             attempt(f"light ({rig.config.light.control})", "on, off", _blink(rig))
         if rig.camera is not None:
             attempt(

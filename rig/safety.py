@@ -19,10 +19,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from core.directions import angle_between, direction_from_angles_deg
+import numpy as np
+from numpy.typing import NDArray
+
+from core.directions import direction_from_angles_deg
 from core.errors import ConfigError, SafetyError
 from rig.config_schema import Table
-from rig.pose import RigPose
+from rig.pose import ROLES, RigPose
 
 __all__ = [
     "ZONE_AXES",
@@ -41,6 +44,7 @@ __all__ = [
     "relative_azimuth_deg",
     "safety_to_dict",
     "separation_deg",
+    "unsafe_poses",
 ]
 
 #: The quantities a forbidden box can bound, in degrees.
@@ -60,9 +64,29 @@ def relative_azimuth_deg(pose: RigPose) -> float:
 
 def separation_deg(pose: RigPose) -> float:
     """Angle between the directions toward the camera and toward the light, degrees."""
-    camera = direction_from_angles_deg(pose.camera_azimuth_deg, pose.camera_inclination_deg)
-    light = direction_from_angles_deg(pose.light_azimuth_deg, pose.light_inclination_deg)
-    return math.degrees(float(angle_between(camera, light)))
+    return float(
+        _separations_deg(
+            np.float64(pose.camera_azimuth_deg),
+            np.float64(pose.camera_inclination_deg),
+            np.float64(pose.light_azimuth_deg),
+            np.float64(pose.light_inclination_deg),
+        )
+    )
+
+
+def _separations_deg(
+    camera_azimuth: Any, camera_inclination: Any, light_azimuth: Any, light_inclination: Any
+) -> Any:
+    """Camera-light angles in degrees of angles in degrees (arrays or numpy scalars).
+
+    One formula for :func:`separation_deg` and :func:`unsafe_poses`, so the two agree to the
+    last bit: directions from the angles (unit by construction), then atan2 of the cross
+    product's length and the dot product (exact near 0, where the limit is checked).
+    """
+    cx, cy, cz = np.moveaxis(direction_from_angles_deg(camera_azimuth, camera_inclination), -1, 0)
+    lx, ly, lz = np.moveaxis(direction_from_angles_deg(light_azimuth, light_inclination), -1, 0)
+    cross = np.sqrt((cy * lz - cz * ly) ** 2 + (cz * lx - cx * lz) ** 2 + (cx * ly - cy * lx) ** 2)
+    return np.degrees(np.arctan2(cross, cx * lx + cy * ly + cz * lz))
 
 
 def describe_pose(pose: RigPose) -> str:
@@ -255,16 +279,23 @@ def check_pose(config: GuardedRig, pose: RigPose) -> None:
         raise SafetyError(f"refused to move to {describe_pose(pose)}: {problem}")
 
 
-def _path_samples(
+def _path_fractions(
     config: GuardedRig, start: RigPose, end: RigPose, step_deg: float | None
-) -> list[tuple[float, RigPose]]:
-    """(fraction, pose) along the straight move, no axis changing by more than the step."""
+) -> list[float]:
+    """Fractions of the straight move to sample: no axis changes by more than the step."""
     step = config.safety.path_step_deg if step_deg is None else step_deg
     if not step > 0:
         raise SafetyError(f"path sampling step must be positive, got {step}")
     largest = max(abs(b - a) for (_, a), (_, b) in zip(start.items(), end.items(), strict=True))
     count = max(1, math.ceil(largest / step))
-    return [(i / count, start.interpolate(end, i / count)) for i in range(count + 1)]
+    return [i / count for i in range(count + 1)]
+
+
+def _path_samples(
+    config: GuardedRig, start: RigPose, end: RigPose, step_deg: float | None
+) -> list[tuple[float, RigPose]]:
+    """(fraction, pose) along the straight move, no axis changing by more than the step."""
+    return [(f, start.interpolate(end, f)) for f in _path_fractions(config, start, end, step_deg)]
 
 
 def _unsafe_at(start: RigPose, end: RigPose, fraction: float, problem: str) -> str:
@@ -272,6 +303,54 @@ def _unsafe_at(start: RigPose, end: RigPose, fraction: float, problem: str) -> s
     return (
         f"the move from {describe_pose(start)} to {describe_pose(end)} is unsafe {where}: {problem}"
     )
+
+
+def unsafe_poses(config: GuardedRig, degrees: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which poses are unsafe, for many poses at once: :func:`pose_violation` is not None.
+
+    Parameters
+    ----------
+    config : the rig's limits and zones
+    degrees : ndarray, shape (N, 5), float64, poses as angles in :data:`rig.pose.ROLES` order
+
+    Returns
+    -------
+    ndarray, shape (N,), bool. The same arithmetic as :func:`pose_violation`, so the two
+    agree sample for sample (tested); this one is what a dry run of thousands of moves can
+    afford.
+    """
+    values = np.asarray(degrees, dtype=np.float64)
+    column = {role: values[:, j] for j, role in enumerate(ROLES)}
+    unsafe = np.zeros(len(values), dtype=bool)
+    for role in ROLES:
+        axis = config.axes.get(role)
+        if axis is None:
+            unsafe |= column[role] != 0.0
+        else:
+            unsafe |= (column[role] < axis.min_deg) | (column[role] > axis.max_deg)
+    limit = config.safety.min_separation_deg
+    if limit > 0.0:
+        unsafe |= (
+            _separations_deg(
+                column["camera_azimuth"],
+                column["camera_inclination"],
+                column["light_azimuth"],
+                column["light_inclination"],
+            )
+            < limit
+        )
+    relative = (column["light_azimuth"] - column["camera_azimuth"] + 180.0) % 360.0 - 180.0
+    for zone in config.safety.forbidden:
+        inside = np.ones(len(values), dtype=bool)
+        for quantity, (low, high) in zone.bounds():
+            if quantity == "relative_azimuth_deg":
+                within = (relative >= low) & (relative <= high)
+                inside &= within if low < high else (relative >= low) | (relative <= high)
+            else:
+                value = column[quantity.removesuffix("_deg")]
+                inside &= (value >= low) & (value <= high)
+        unsafe |= inside
+    return unsafe
 
 
 def path_violation(
@@ -284,8 +363,14 @@ def path_violation(
     ``safety.path_step_deg``) between samples, ends included. A zone thinner than the step in
     every direction could slip between samples: keep zones wider than the step.
     """
-    for fraction, pose in _path_samples(config, start, end, step_deg):
-        problem = pose_violation(config, pose)
+    fractions = _path_fractions(config, start, end, step_deg)
+    a = np.array([value for _, value in start.items()])
+    b = np.array([value for _, value in end.items()])
+    # As RigPose.interpolate computes each sample, so both checks see the same angles.
+    degrees = a + np.array(fractions)[:, None] * (b - a)
+    for index in np.flatnonzero(unsafe_poses(config, degrees)):
+        fraction = fractions[int(index)]
+        problem = pose_violation(config, start.interpolate(end, fraction))  # its words
         if problem is not None:
             return _unsafe_at(start, end, fraction, problem)
     return None

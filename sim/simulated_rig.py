@@ -22,6 +22,7 @@ from sim.dynamixel_emulator import ServoChainEmulator
 from sim.dynamixel_faults import FaultConfig
 from sim.dynamixel_servo import ServoSpec
 from sim.grbl_emulator import GrblEmulator, GrblFaults
+from sim.scenes import get_scene
 from sim.simulated_camera import SimulatedCamera
 
 __all__ = ["SimulatedRig", "simulated_camera", "simulated_capture_config"]
@@ -44,6 +45,7 @@ def simulated_capture_config(
     """
     if not speed > 0:
         raise InputError(f"the axis speed factor must be positive, got {speed}")
+    get_scene(scene)  # an unknown scene is refused before a dataset is made for it
     base = simulated_config(IN_PROCESS_PORT, IN_PROCESS_PORT, scene=scene)
     axes = {
         role: dataclasses.replace(

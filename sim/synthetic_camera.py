@@ -101,10 +101,13 @@ def _light_geometry(
             len(points), light.irradiance
         )
     position = np.asarray(light.position, dtype=np.float64)
-    if np.linalg.norm(position) <= samples.bounding_radius or not light.intensity >= 0:
+    if not light.intensity >= 0:
+        raise InputError(f"point light intensity {light.intensity} must not be negative")
+    distance_to_origin = float(np.linalg.norm(position))
+    if distance_to_origin <= samples.bounding_radius:
         raise InputError(
-            f"point light at {light.position} is inside the object (bounding radius "
-            f"{samples.bounding_radius:.3g}) or has a negative intensity"
+            f"point light at distance {distance_to_origin:.3g} is inside the object (bounding "
+            f"radius {samples.bounding_radius:.3g}); place the light further out"
         )
     offset = position - points
     distance = np.linalg.norm(offset, axis=1)

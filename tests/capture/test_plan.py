@@ -19,12 +19,13 @@ from capture.plan_file import load_plan, parse_plan
 from capture.plan_order import move_seconds
 from core.directions import direction_from_angles_deg
 from core.errors import InputError
-from rig.config import AxisConfig, LightConfig, RigConfig, simulated_config
+from rig.config import AxisConfig, LightConfig, RigConfig, load_config, simulated_config
 from rig.hardware import _move_seconds
 from rig.pose import RigPose
 from rig.safety import ForbiddenZone, SafetyConfig, path_violation, pose_violation
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "plan.example.toml"
+RIG_EXAMPLE = EXAMPLE.with_name("rig.example.toml")
 
 
 def _config(**safety: object) -> RigConfig:
@@ -264,20 +265,22 @@ def _escaped(text: str) -> str:
 
 def test_example_plan_loads() -> None:
     plan = load_plan(EXAMPLE)
-    assert len(plan.cameras) == 16 and len(plan.lights) == 48
-    assert plan.cameras[:3] == ((0.0, 30.0), (45.0, 30.0), (90.0, 30.0))
-    assert plan.cameras[8] == (0.0, 60.0)
+    assert len(plan.cameras) == 16 and len(plan.lights) == 36
+    assert plan.cameras[:3] == ((-157.5, 30.0), (-112.5, 30.0), (-67.5, 30.0))
+    assert plan.cameras[8] == (-157.5, 60.0)
+    assert plan.lights[19] == (45.0, 45.0)
     assert plan.exposures_ms == (10.0, 40.0, 160.0)
     names = Counter(c.name for c in plan.calibration)
-    assert names == {"charuco": 16, "mirror-sphere": 48, "white-target": 48}
-    assert plan.calibration[0] == CalibrationCapture("charuco", 0, 0, (20.0,))
+    assert names == {"charuco": 16, "mirror-sphere": 36, "white-target": 36}
+    assert plan.calibration[0] == CalibrationCapture("charuco", 0, 19, (20.0,))
     assert plan.calibration[16] == CalibrationCapture("mirror-sphere", 0, 0, (5.0,))
     assert plan.calibration[-1].exposures_ms == plan.exposures_ms  # the plan's bracket
     config = _config()
     events = plan.events(config)
     first = events[0]
-    assert first.key == ImageKey("calibration", 0, 0, 0)
-    assert first.name == "calibration_c000_l000_e0_charuco" and first.light_on
+    assert first.key.kind == "calibration" and first.name.endswith("_charuco") and first.light_on
+    # The example pair is runnable: every pose within the limits.
+    assert all(check.ok for check in plan.limit_checks(load_config(RIG_EXAMPLE)))
     calibration = [e for e in events if e.key.kind == "calibration"]
     assert events[: len(calibration)] == tuple(calibration)  # calibration before the sweep
     assert len({e.key for e in events}) == len(events)
@@ -364,7 +367,7 @@ count = 8
         (BASE.replace("[10, 20]", "[10, 'x']"), "exposures_ms[1] = 'x' must be a finite number"),
         (BASE.replace("exposures_ms = [10, 20]", ""), "exposures_ms is missing"),
         (BASE.replace('layout = "fibonacci"', 'layout = "spiral"'), "lights.layout = 'spiral'"),
-        (BASE.replace("count = 8", "count = 0"), "lights.count = 0 must be at least 1"),
+        (BASE.replace("count = 8", "count = 0"), "lights.count = 0 must be in 1..10000"),
         ("ordering = 'fastest'\n" + BASE, "ordering = 'fastest' is not one of"),
         (
             BASE.replace("count = 8", "count = 8\nposes_deg = [[0, 0]]"),

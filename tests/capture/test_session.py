@@ -30,7 +30,7 @@ from sim.grbl_emulator import GrblFaults
 from sim.simulated_rig import SimulatedRig, simulated_capture_config
 
 SIM = ["--sim", "--cameras", "2", "--lights", "5", "--size", "32", "--points", "1500",
-       "--speed", "20", "--quiet"]  # fmt: skip
+       "--speed", "20", "--exposure-ms", "40", "--quiet"]  # fmt: skip
 
 
 def _config(**camera: Any) -> RigConfig:

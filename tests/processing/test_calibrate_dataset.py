@@ -51,6 +51,7 @@ def captured(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp("calibration") / "dataset"
     argv = ["capture", "--sim", "--calibrate", "--cameras", "3", "--lights", "5"]
     argv += ["--layout", "grid", "--size", "160", "--points", "1500", "--speed", "20"]
+    argv += ["--exposure-ms", "40"]  # the targets well exposed (the default suits the sphere)
     assert main([*argv, "--quiet", "-o", str(path)]) == 0
     return path
 

@@ -349,3 +349,13 @@ def test_relative_paths_resolve_next_to_the_config(tmp_path: Path) -> None:
     assert loaded.resolve("raw") == path.parent / "raw"
     assert loaded.resolve("/abs/raw") == Path("/abs/raw")
     assert config.resolve("raw") == Path("raw")
+
+
+def test_the_example_config_fits_its_servos_in_one_turn() -> None:
+    # A config the driver refuses on connect is no example (the servo limits map to ticks).
+    from rig.dynamixel import DynamixelChain
+    from rig.hardware import servo_axis
+
+    config = load_config(Path(__file__).resolve().parents[2] / "docs" / "rig.example.toml")
+    axes = [servo_axis(a) for a in config.axes.values() if a.device == "dynamixel"]
+    DynamixelChain._check_axes("example", axes)

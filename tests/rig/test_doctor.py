@@ -164,17 +164,12 @@ def test_a_servo_falling_silent_after_connect_fails_the_pose_read() -> None:
             rig.arm.close()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: run_doctor reads the start pose (rig.pose()) outside any check, so a device "
-    "that fails there raises DeviceError out of the doctor instead of a FAILED row, and the "
-    "rows gathered so far (and the close failure) are lost",
-)
 def test_a_servo_falling_silent_after_connect_is_reported_not_raised() -> None:
     faults = FaultConfig(silent_ids=frozenset({2}), silent_after=SILENT_AFTER_CONNECT)
     with SimulatedRig(servo_faults=faults) as simulated:
         checks = run_doctor(simulated.rig(camera=False))
-        assert checks[0].ok  # connected
+        # Silent from the connect's last packets on: on a loaded machine its retries may
+        # already meet the silence. Either way a FAILED row names it and nothing escapes.
         assert any(not c.ok and "servo 2" in c.detail for c in checks)
 
 

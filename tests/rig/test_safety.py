@@ -3,6 +3,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -20,6 +21,7 @@ from rig.safety import (
     pose_violation,
     relative_azimuth_deg,
     separation_deg,
+    unsafe_poses,
 )
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "rig.example.toml"
@@ -173,3 +175,19 @@ def test_limits_checks_are_pure_and_need_no_device() -> None:
     assert pose_violation(config, pose) is None
     assert pose_violation(CONFIG, pose) is not None
     assert config.to_toml() == before
+
+
+wide_angles = st.floats(-200.0, 200.0, allow_nan=False)
+any_poses = st.builds(RigPose, wide_angles, st.floats(0.0, 95.0), wide_angles,
+                      st.floats(-5.0, 95.0))  # fmt: skip
+
+
+@settings(max_examples=200)
+@given(pose_list=st.lists(any_poses, min_size=1, max_size=20))
+def test_the_array_check_agrees_with_the_pose_check(pose_list: list[RigPose]) -> None:
+    # The dry run screens thousands of path samples at once with unsafe_poses; it must
+    # flag exactly what pose_violation refuses (limits, separation and every zone kind).
+    degrees = np.array([[value for _, value in pose.items()] for pose in pose_list])
+    flagged = unsafe_poses(CONFIG, degrees)
+    assert CONFIG.safety.forbidden and CONFIG.safety.min_separation_deg > 0
+    assert list(flagged) == [pose_violation(CONFIG, pose) is not None for pose in pose_list]

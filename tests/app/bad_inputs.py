@@ -1,0 +1,1108 @@
+"""A sweep of bad inputs over every ``rig`` sub-command: each must be a clear refusal.
+
+Each :class:`Case` is one command line a new user could type (a missing, empty, truncated
+or wrong file, a value out of range, a damaged dataset or field store), run in-process
+through :func:`app.cli.main` with an alarm (a hang is a finding, not a stuck suite), and
+classified:
+
+clear
+    the expected status (2 for a refusal, 1 for ``rig verify``'s "damaged") and the
+    expected words in the message, which name the file or the value;
+unclear
+    refused, but the message does not say what the case expects (or says it twice);
+traceback
+    an exception other than the project's errors left ``main``;
+hang
+    still running after :data:`HANG_SECONDS`;
+silent
+    accepted (status 0) where it should have been refused.
+
+``tests/app/test_bad_inputs.py`` requires every case to be clear; ``python -m
+tests.app.bad_inputs`` runs the sweep and prints the counts per outcome.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import itertools
+import shutil
+import signal
+import sys
+import traceback
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import FrameType
+
+import numpy as np
+
+from app.cli import main
+from core.image_io import write_exr
+
+#: Flags naming what a command writes.
+OUTPUT_FLAGS = ("-o", "--output", "--json", "--write-config")
+
+#: Seconds a bad input may take before it counts as a hang (a refusal takes well under one).
+HANG_SECONDS = 60
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """What the cases read: a small field, a small dataset, panoramas, and bad files.
+
+    Built once (:func:`build_workspace`); a case that damages something works on a copy.
+    """
+
+    root: Path
+    field: Path
+    dataset: Path
+    panorama: Path
+    rti: Path
+
+    def file(self, name: str) -> Path:
+        """A prepared bad file (see :func:`build_workspace`)."""
+        return self.root / "files" / name
+
+
+Prepare = Callable[[Workspace, Path], None]
+
+
+@dataclass(frozen=True)
+class Case:
+    """One bad command line and what its refusal must say.
+
+    ``argv`` may use ``{field}``, ``{dataset}``, ``{panorama}``, ``{rti}``, ``{files}`` (the
+    prepared bad files) and ``{tmp}`` (a fresh folder of the case's own, where ``prepare``
+    may copy and damage things first).
+    """
+
+    name: str
+    argv: tuple[str, ...]
+    expect: tuple[str, ...]
+    status: int = 2
+    prepare: Prepare | None = None
+    stdout: bool = False  # the expected words are on stdout (rig verify's report)
+
+
+@dataclass
+class Outcome:
+    """What running a case gave."""
+
+    kind: str
+    status: int | None
+    out: str
+    err: str
+    detail: str = ""
+    extra: dict[str, str] = field(default_factory=dict)
+
+
+class _Hang(Exception):
+    pass
+
+
+def _on_alarm(signum: int, frame: FrameType | None) -> None:
+    raise _Hang
+
+
+def run_case(case: Case, workspace: Workspace, tmp: Path) -> Outcome:
+    """Run ``case`` in-process and classify what it did."""
+    tmp.mkdir(parents=True, exist_ok=True)
+    if case.prepare is not None:
+        case.prepare(workspace, tmp)
+    argv = [
+        part.format(
+            field=workspace.field,
+            dataset=workspace.dataset,
+            panorama=workspace.panorama,
+            rti=workspace.rti,
+            files=workspace.root / "files",
+            tmp=tmp,
+        )
+        for part in case.argv
+    ]
+    # A refusal leaves nothing behind: no output file, store or dataset folder that was not
+    # there before (a half-made dataset would block the retry).
+    outputs = [
+        Path(value)
+        for flag, value in itertools.pairwise(argv)
+        if flag in OUTPUT_FLAGS and value.startswith(str(tmp)) and not Path(value).exists()
+    ]
+    out, err = io.StringIO(), io.StringIO()
+    previous = signal.signal(signal.SIGALRM, _on_alarm)
+    signal.alarm(HANG_SECONDS)
+    status: int | None = None
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            status = main(argv)
+    except _Hang:
+        return Outcome("hang", None, out.getvalue(), err.getvalue(), f"> {HANG_SECONDS} s")
+    except BaseException:
+        return Outcome("traceback", None, out.getvalue(), err.getvalue(), traceback.format_exc())
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+    text = (out if case.stdout else err).getvalue()
+    if status == 0 and case.status != 0:
+        return Outcome("silent", status, out.getvalue(), err.getvalue())
+    if "Traceback (most recent call last)" in err.getvalue():
+        return Outcome("traceback", status, out.getvalue(), err.getvalue(), "printed")
+    missing = [words for words in case.expect if words.format(tmp=tmp) not in text]
+    said = out.getvalue().splitlines() + err.getvalue().splitlines()
+    repeated = [line for line, n in Counter(said).items() if n > 1 and line.strip()]
+    left = [str(path) for path in outputs if path.exists() and case.status != 0]
+    left += [str(path) for path in tmp.rglob("*.partial*")]
+    if status != case.status or missing or repeated or left:
+        detail = f"status {status}, missing {missing}, repeated {repeated}, left behind {left}"
+        return Outcome("unclear", status, out.getvalue(), err.getvalue(), detail)
+    return Outcome("clear", status, out.getvalue(), err.getvalue())
+
+
+# --- the workspace ------------------------------------------------------------------------
+
+
+def build_workspace(root: Path) -> Workspace:
+    """Make the small field, dataset and bad files the cases read (about 15 s)."""
+    from core.sample_data import panorama_path, rti_capture_path
+
+    root.mkdir(parents=True, exist_ok=True)
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        made = main(
+            [
+                "sim",
+                "field",
+                "--scene",
+                "glossy-sphere",
+                "--lights",
+                "6",
+                "--cameras",
+                "3",
+                "--points",
+                "400",
+                "--size",
+                "32x32",
+                "-o",
+                str(root / "field.zarr"),
+            ]
+        )
+        made |= main(
+            [
+                "capture",
+                "--sim",
+                "--cameras",
+                "2",
+                "--lights",
+                "3",
+                "--size",
+                "32",
+                "--points",
+                "1500",
+                "--speed",
+                "50",
+                "--quiet",
+                "-o",
+                str(root / "dataset"),
+            ]
+        )
+    if made:
+        raise RuntimeError("the bad-input workspace could not be built")
+    files = root / "files"
+    files.mkdir()
+    rng = np.random.default_rng(0)
+    sky = (rng.random((16, 32, 3)) + 0.1).astype(np.float32)
+    for name in ("zero.png", "zero.hdr", "zero.exr", "zero.jpg", "zero.npz", "zero.toml"):
+        (files / name).touch()
+    (files / "text.exr").write_text("not an image\n")
+    (files / "text.png").write_text("not an image\n")
+    (files / "folder.exr").mkdir()
+    write_exr(files / "sky.exr", sky)
+    whole = (files / "sky.exr").read_bytes()
+    (files / "truncated.exr").write_bytes(whole[: len(whole) // 2])
+    write_exr(files / "tiny.exr", sky[:1, :2])
+    write_exr(files / "square.exr", sky[:, :16])
+    write_exr(files / "huge.exr", np.where(np.arange(32)[None, :, None] == 3, 1e30, sky))
+    nan = sky.copy()
+    nan[2, 3, 1] = np.nan
+    write_exr(files / "nan.exr", nan)
+    write_exr(files / "black.exr", np.zeros_like(sky))
+    write_exr(files / "negative.exr", sky - 0.6)
+    write_exr(files / "blackmod.exr", np.zeros((8, 16, 3), np.float32))
+    (files / "bad.toml").write_text("this is = = not toml\n")
+    (files / "huge-plan.toml").write_text(
+        "exposures_ms = [10.0]\n[cameras]\nazimuth_deg = { start = 0, stop = 360, step = 0.036 }"
+        "\ninclination_deg = { start = 0, stop = 89.99, step = 0.01 }\n"
+        '[lights]\nlayout = "grid"\ncount = 10\n'
+    )
+    (files / "points.npz").write_bytes(b"PK\x03\x04 not really a zip")
+    (files / "existing.png").write_bytes(b"keep me")
+    (files / "existing.txt").write_text("keep me\n")
+    return Workspace(
+        root=root,
+        field=root / "field.zarr",
+        dataset=root / "dataset",
+        panorama=panorama_path("courtyard"),
+        rti=rti_capture_path(),
+    )
+
+
+# --- damage, applied to a copy in the case's folder ---------------------------------------
+
+
+def _copy_field(workspace: Workspace, tmp: Path) -> Path:
+    target = tmp / "field.zarr"
+    shutil.copytree(workspace.field, target)
+    return target
+
+
+def _copy_dataset(workspace: Workspace, tmp: Path) -> Path:
+    target = tmp / "dataset"
+    shutil.copytree(workspace.dataset, target, ignore=shutil.ignore_patterns(".lock"))
+    return target
+
+
+def _first_radiance_chunk(store: Path) -> Path:
+    return next(p for p in sorted((store / "radiance").rglob("*")) if p.is_file())
+
+
+def delete_chunk(workspace: Workspace, tmp: Path) -> None:
+    """A field store with one radiance chunk deleted."""
+    _first_radiance_chunk(_copy_field(workspace, tmp)).unlink()
+
+
+def truncate_chunk(workspace: Workspace, tmp: Path) -> None:
+    """A field store with one radiance chunk cut to half its bytes."""
+    chunk = _first_radiance_chunk(_copy_field(workspace, tmp))
+    chunk.write_bytes(chunk.read_bytes()[: chunk.stat().st_size // 2])
+
+
+def nan_radiance(workspace: Workspace, tmp: Path) -> None:
+    """A field store whose radiance holds NaN (written behind the writer's back)."""
+    import zarr
+
+    group = zarr.open_group(str(_copy_field(workspace, tmp)), mode="r+")
+    radiance = group["radiance"]
+    slab = np.asarray(radiance[0, 0])
+    slab[5, 1] = np.nan
+    radiance[0, 0] = slab
+
+
+def copy_field(workspace: Workspace, tmp: Path) -> None:
+    """An intact copy of the field store (to overwrite, or to fit beside)."""
+    _copy_field(workspace, tmp)
+
+
+def copy_dataset(workspace: Workspace, tmp: Path) -> None:
+    """An intact copy of the dataset."""
+    _copy_dataset(workspace, tmp)
+
+
+def _images(dataset: Path) -> list[Path]:
+    return sorted(p for p in (dataset / "images").rglob("*") if p.is_file())
+
+
+def delete_image(workspace: Workspace, tmp: Path) -> None:
+    """A dataset with one image deleted."""
+    _images(_copy_dataset(workspace, tmp))[-1].unlink()
+
+
+def corrupt_image(workspace: Workspace, tmp: Path) -> None:
+    """A dataset with one image cut short (its size differs from the record)."""
+    image = _images(_copy_dataset(workspace, tmp))[-1]
+    image.write_bytes(image.read_bytes()[:100])
+
+
+def empty_journal(workspace: Workspace, tmp: Path) -> None:
+    """A dataset whose journal was emptied."""
+    (_copy_dataset(workspace, tmp) / "journal.jsonl").write_text("")
+
+
+def delete_journal(workspace: Workspace, tmp: Path) -> None:
+    """A dataset whose journal was deleted."""
+    (_copy_dataset(workspace, tmp) / "journal.jsonl").unlink()
+
+
+def garbage_manifest(workspace: Workspace, tmp: Path) -> None:
+    """A dataset whose manifest is not JSON."""
+    (_copy_dataset(workspace, tmp) / "manifest.json").write_text("{ not json")
+
+
+def garbage_models(workspace: Workspace, tmp: Path) -> None:
+    """A copy of the field with a model fit beside it that is not an npz file."""
+    store = _copy_field(workspace, tmp)
+    (store.parent / (store.name + ".models.npz")).write_bytes(b"not a zip")
+
+
+def other_field_models(workspace: Workspace, tmp: Path) -> None:
+    """A copy of the field with a fit of a different field saved beside it."""
+    store = _copy_field(workspace, tmp)
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        main(
+            [
+                "sim",
+                "field",
+                "--scene",
+                "diffuse-sphere",
+                "--lights",
+                "6",
+                "--cameras",
+                "3",
+                "--points",
+                "400",
+                "--size",
+                "32x32",
+                "-o",
+                str(tmp / "other.zarr"),
+            ]
+        )
+    from core.field_store import ReflectanceField
+    from processing.sample_model_store import models_for_field
+
+    with contextlib.redirect_stderr(io.StringIO()):
+        models_for_field(ReflectanceField.open(tmp / "other.zarr"), tmp / "other.npz")
+    del store
+
+
+def an_output_folder(workspace: Workspace, tmp: Path) -> None:
+    """A non-empty folder where an output file or store is asked for."""
+    (tmp / "out.png").mkdir()
+    (tmp / "out.png" / "x").write_text("x")
+    (tmp / "taken").mkdir()
+    (tmp / "taken" / "keep.txt").write_text("keep me")
+
+
+# --- the cases ---------------------------------------------------------------------------
+
+F = "{files}/"
+
+
+def _panorama_cases(command: tuple[str, ...], flag: tuple[str, ...] = ()) -> list[Case]:
+    """Bad panorama files given to a command that reads one (``flag`` before the path)."""
+    name = " ".join(command[:2])
+    return [
+        Case(f"{name}: {what}", (*command, *flag, F + file), (file, words))
+        for what, file, words in (
+            ("missing panorama", "nowhere.exr", "no such file"),
+            ("zero-byte .png", "zero.png", "empty"),
+            ("zero-byte .hdr", "zero.hdr", "empty"),
+            ("zero-byte .exr", "zero.exr", "empty"),
+            ("text as .exr", "text.exr", "exr"),
+            ("truncated .exr", "truncated.exr", "truncated.exr"),
+            ("directory as a file", "folder.exr", "is a directory"),
+            ("1x2 image", "tiny.exr", "too small"),
+            ("non-2:1 image", "square.exr", "twice as wide"),
+            ("values of 1e30", "huge.exr", "1e+30"),
+            ("a NaN", "nan.exr", "NaN"),
+            ("all black", "black.exr", "no light"),
+            ("material negatives", "negative.exr", "negative radiance"),
+            ("unknown format", "zero.toml", "unknown image format"),
+        )
+    ]
+
+
+def _cases() -> list[Case]:
+    pano = "{panorama}"
+    relight = ("relight", "{field}", "--env", pano, "--view", "20,40", "--size", "32x32")
+    relight_png = (*relight, "-o", "{tmp}/r.png")
+    field = (
+        "sim",
+        "field",
+        "--scene",
+        "glossy-sphere",
+        "--lights",
+        "4",
+        "--cameras",
+        "2",
+        "--points",
+        "300",
+        "--size",
+        "32x32",
+    )
+    render = (
+        "sim",
+        "render",
+        "--scene",
+        "glossy-sphere",
+        "--env",
+        pano,
+        "--view",
+        "0,30",
+        "--size",
+        "32x32",
+        "--points",
+        "500",
+        "-o",
+        "{tmp}/gt.exr",
+    )
+    photo = (
+        "sim",
+        "photo",
+        "--scene",
+        "glossy-sphere",
+        "--view",
+        "0,30",
+        "--light",
+        "0,60",
+        "--size",
+        "32x32",
+        "--points",
+        "500",
+    )
+    cases: list[Case] = []
+    # rig sample
+    sample = ("sample", "-o", "{tmp}/s")
+    cases += _panorama_cases(sample)
+    cases += [
+        Case("sample: -k 0", (*sample, pano, "-k", "0"), ("-k", "at least 1")),
+        Case("sample: -k abc", (*sample, pano, "-k", "abc"), ("-k", "'abc'")),
+        Case(
+            "sample: -k above the pixels",
+            (*sample, F + "sky.exr", "-k", "100000"),
+            ("100000", "pixels"),
+        ),
+        Case("sample: --seed -1", (*sample, pano, "--seed", "-1"), ("--seed",)),
+        Case("sample: --yaw nan", (*sample, pano, "--yaw", "nan"), ("--yaw", "finite")),
+        Case("sample: --exposure 0", (*sample, pano, "--exposure", "0"), ("--exposure",)),
+        Case("sample: --exposure 1e20", (*sample, pano, "--exposure", "1e20"), ("exposure 1e+20",)),
+        Case(
+            "sample: zero-byte --modulation",
+            (*sample, pano, "--modulation", F + "zero.png"),
+            ("zero.png", "empty"),
+        ),
+        Case(
+            "sample: missing --modulation",
+            (*sample, pano, "--modulation", F + "no.png"),
+            ("no.png", "no such file"),
+        ),
+        Case(
+            "sample: black --modulation",
+            (*sample, pano, "--modulation", F + "blackmod.exr"),
+            ("blackmod.exr", "zero"),
+        ),
+        Case(
+            "sample: -o an existing file",
+            ("sample", pano, "-o", F + "existing.txt"),
+            ("existing.txt", "not a directory"),
+        ),
+        Case(
+            "sample: -o under a file",
+            ("sample", pano, "-o", F + "existing.txt/x"),
+            ("existing.txt", "not a directory"),
+        ),
+    ]
+    # rig relight
+    cases += _panorama_cases(
+        ("relight", "{field}", "-o", "{tmp}/r.png", "--view", "20,40"), ("--env",)
+    )
+    cases += [
+        Case(
+            "relight: missing field",
+            ("relight", "{tmp}/none.zarr", "--env", pano, "-o", "{tmp}/r.png"),
+            ("none.zarr", "no such"),
+        ),
+        Case(
+            "relight: a dataset as the field",
+            ("relight", "{dataset}", "--env", pano, "-o", "{tmp}/r.png"),
+            ("dataset", "neither a field store"),
+        ),
+        Case(
+            "relight: a file as the field",
+            ("relight", F + "existing.txt", "--env", pano, "-o", "{tmp}/r.png"),
+            ("existing.txt",),
+        ),
+        Case(
+            "relight: no --view for points",
+            ("relight", "{field}", "--env", pano, "-o", "{tmp}/r.png"),
+            ("--view",),
+        ),
+        Case("relight: --view a,b", (*relight_png, "--view", "a,b"), ("--view", "AZ,INCL")),
+        Case("relight: --view 1,2,3", (*relight_png, "--view", "1,2,3"), ("--view", "1,2,3")),
+        Case(
+            "relight: --distance 0.5",
+            (*relight_png, "--distance", "0.5"),
+            ("distance 0.5", "inside the object"),
+        ),
+        Case("relight: --distance 0", (*relight_png, "--distance", "0"), ("--distance",)),
+        Case(
+            "relight: --size 100000x100000",
+            (*relight_png, "--size", "100000x100000"),
+            ("--size", "100000x100000"),
+        ),
+        Case("relight: --size 0x5", (*relight_png, "--size", "0x5"), ("--size", "0x5")),
+        Case("relight: --size 9e9x2", (*relight_png, "--size", "big"), ("--size", "'big'")),
+        Case("relight: --fov 0", (*relight_png, "--fov", "0"), ("--fov",)),
+        Case("relight: --fov 180", (*relight_png, "--fov", "180"), ("field of view", "180")),
+        Case("relight: --fps 0 to GIF", (*relight, "-o", "{tmp}/r.gif", "--fps", "0"), ("--fps",)),
+        Case(
+            "relight: --fps -5 to GIF", (*relight, "-o", "{tmp}/r.gif", "--fps", "-5"), ("--fps",)
+        ),
+        Case("relight: --fps 0 to MP4", (*relight, "-o", "{tmp}/r.mp4", "--fps", "0"), ("--fps",)),
+        Case(
+            "relight: --frames 0", (*relight, "-o", "{tmp}/r.gif", "--frames", "0"), ("--frames",)
+        ),
+        Case("relight: -m 99 with 6 lights", (*relight_png, "-m", "99"), ("-m 99", "6")),
+        Case("relight: -n 99 with 3 cameras", (*relight_png, "-n", "99"), ("-n 99", "3")),
+        Case("relight: -k 0", (*relight_png, "-k", "0"), ("-k",)),
+        Case("relight: --grid 0", (*relight_png, "--scheme", "model", "--grid", "0"), ("--grid",)),
+        Case("relight: --yaw inf", (*relight_png, "--yaw", "inf"), ("--yaw",)),
+        Case("relight: --exposure -1", (*relight_png, "--exposure", "-1"), ("--exposure",)),
+        Case(
+            "relight: --models a folder",
+            (*relight_png, "--scheme", "model", "--models", "{tmp}/taken"),
+            ("taken", "not a readable models file"),
+            prepare=an_output_folder,
+        ),
+        Case(
+            "relight: --models not a fit",
+            (*relight_png, "--scheme", "model", "--models", F + "points.npz"),
+            ("points.npz",),
+        ),
+        Case(
+            "relight: a damaged saved fit",
+            (
+                "relight",
+                "{tmp}/field.zarr",
+                "--env",
+                pano,
+                "--view",
+                "20,40",
+                "--size",
+                "32x32",
+                "--scheme",
+                "model",
+                "-o",
+                "{tmp}/r.png",
+            ),
+            ("field.zarr.models.npz",),
+            prepare=garbage_models,
+        ),
+        Case(
+            "relight: another field's fit",
+            (*relight_png, "--scheme", "model", "--models", "{tmp}/other.npz"),
+            ("other.npz", "fitted to other data"),
+            prepare=other_field_models,
+        ),
+        Case(
+            "relight: -o a directory",
+            (*relight, "-o", "{tmp}/out.png"),
+            ("out.png", "directory"),
+            prepare=an_output_folder,
+        ),
+        Case(
+            "relight: -o under a file",
+            (*relight, "-o", F + "existing.txt/r.png"),
+            ("existing.txt", "not a directory"),
+        ),
+        Case("relight: -o .bmp", (*relight, "-o", "{tmp}/r.bmp"), ("r.bmp",)),
+        Case(
+            "relight: modulation with every pixel",
+            (*relight_png, "--scheme", "pixels", "--modulation", F + "sky.exr"),
+            ("modulation map", "every part of the panorama"),
+        ),
+        Case(
+            "relight: zero-byte --modulation",
+            (*relight_png, "-k", "8", "--modulation", F + "zero.png"),
+            ("zero.png", "empty"),
+        ),
+        Case(
+            "relight: turntable of a pixel field",
+            ("relight", "{rti}", "--env", pano, "-o", "{tmp}/r.gif", "--sequence", "turntable"),
+            ("one fixed view", "--sequence environment"),
+        ),
+        Case(
+            "relight: a field with a missing chunk",
+            (
+                "relight",
+                "{tmp}/field.zarr",
+                "--env",
+                pano,
+                "--view",
+                "20,40",
+                "--size",
+                "32x32",
+                "-k",
+                "8",
+                "-o",
+                "{tmp}/r.png",
+            ),
+            ("field.zarr", "missing", "camera 0 light 0"),
+            prepare=delete_chunk,
+        ),
+        Case(
+            "relight: a field with a truncated chunk",
+            (
+                "relight",
+                "{tmp}/field.zarr",
+                "--env",
+                pano,
+                "--view",
+                "20,40",
+                "--size",
+                "32x32",
+                "-k",
+                "8",
+                "-o",
+                "{tmp}/r.png",
+            ),
+            ("field.zarr", "camera 0 light 0"),
+            prepare=truncate_chunk,
+        ),
+        Case(
+            "relight: a field holding NaN",
+            (
+                "relight",
+                "{tmp}/field.zarr",
+                "--env",
+                pano,
+                "--view",
+                "20,40",
+                "--size",
+                "32x32",
+                "-k",
+                "8",
+                "-o",
+                "{tmp}/r.png",
+            ),
+            ("field.zarr", "non-finite", "camera 0"),
+            prepare=nan_radiance,
+        ),
+    ]
+    # rig verify
+    cases += [
+        Case("verify: missing path", ("verify", "{tmp}/none"), ("none", "no such")),
+        Case("verify: a file", ("verify", F + "existing.txt"), ("existing.txt",)),
+        Case("verify: an empty folder", ("verify", "{tmp}"), ("manifest",)),
+        Case(
+            "verify: a deleted image",
+            ("verify", "{tmp}/dataset"),
+            ("missing",),
+            status=1,
+            prepare=delete_image,
+            stdout=True,
+        ),
+        Case(
+            "verify: a cut image",
+            ("verify", "{tmp}/dataset"),
+            ("corrupt",),
+            status=1,
+            prepare=corrupt_image,
+            stdout=True,
+        ),
+        Case(
+            "verify: an emptied journal",
+            ("verify", "{tmp}/dataset"),
+            ("not journaled", "journal.jsonl"),
+            status=1,
+            prepare=empty_journal,
+            stdout=True,
+        ),
+        Case(
+            "verify: a deleted journal",
+            ("verify", "{tmp}/dataset"),
+            ("not journaled", "journal.jsonl"),
+            status=1,
+            prepare=delete_journal,
+            stdout=True,
+        ),
+        Case(
+            "verify: a manifest not JSON",
+            ("verify", "{tmp}/dataset"),
+            ("manifest.json",),
+            prepare=garbage_manifest,
+        ),
+        Case(
+            "verify: a store missing a chunk",
+            ("verify", "{tmp}/field.zarr", "--quiet"),
+            ("missing", "camera 0 light 0"),
+            status=1,
+            prepare=delete_chunk,
+            stdout=True,
+        ),
+        Case(
+            "verify: a store with a cut chunk",
+            ("verify", "{tmp}/field.zarr", "--quiet"),
+            ("camera 0 light 0",),
+            status=1,
+            prepare=truncate_chunk,
+            stdout=True,
+        ),
+        Case(
+            "verify: a store holding NaN",
+            ("verify", "{tmp}/field.zarr", "--quiet"),
+            ("non-finite",),
+            status=1,
+            prepare=nan_radiance,
+            stdout=True,
+        ),
+    ]
+    # rig process
+    process = ("process", "{tmp}/dataset", "-o", "{tmp}/f.zarr")
+    cases += [
+        Case(
+            "process: missing dataset", ("process", "{tmp}/none", "-o", "{tmp}/f.zarr"), ("none",)
+        ),
+        Case(
+            "process: a deleted image",
+            process,
+            ("missing", "--allow-missing"),
+            prepare=delete_image,
+        ),
+        Case("process: a cut image", process, ("corrupt",), prepare=corrupt_image),
+        Case("process: an emptied journal", process, ("journal",), prepare=empty_journal),
+        Case(
+            "process: an existing output",
+            ("process", "{dataset}", "-o", "{tmp}/field.zarr"),
+            ("field.zarr", "--overwrite"),
+            prepare=copy_field,
+        ),
+        Case(
+            "process: -o a non-empty folder",
+            ("process", "{dataset}", "-o", "{tmp}/taken"),
+            ("taken", "not a field store"),
+            prepare=an_output_folder,
+        ),
+        Case(
+            "process: missing --points",
+            ("process", "{dataset}", "-o", "{tmp}/f.zarr", "--points", "{tmp}/none.ply"),
+            ("none.ply",),
+        ),
+        Case(
+            "process: --points not a cloud",
+            ("process", "{dataset}", "-o", "{tmp}/f.zarr", "--points", F + "points.npz"),
+            ("points.npz",),
+        ),
+        Case(
+            "process: zero-byte --points",
+            ("process", "{dataset}", "-o", "{tmp}/f.zarr", "--points", F + "zero.npz"),
+            ("zero.npz",),
+        ),
+        Case(
+            "process: --scene teapot",
+            ("process", "{dataset}", "-o", "{tmp}/f.zarr", "--scene", "teapot"),
+            ("teapot",),
+        ),
+        Case(
+            "process: --size 0x0",
+            ("process", "{dataset}", "-o", "{tmp}/f.zarr", "--size", "0x0"),
+            ("--size",),
+        ),
+        Case(
+            "process: --spacing 0",
+            ("process", "{dataset}", "-o", "{tmp}/f.zarr", "--spacing", "0"),
+            ("--spacing",),
+        ),
+        Case(
+            "process: --camera-distance 0.5",
+            ("process", "{dataset}", "-o", "{tmp}/f.zarr", "--camera-distance", "0.5"),
+            ("inside the object",),
+        ),
+    ]
+    # rig capture
+    capture = (
+        "capture",
+        "--sim",
+        "--quiet",
+        "--speed",
+        "50",
+        "--size",
+        "32",
+        "--points",
+        "1000",
+        "--cameras",
+        "2",
+        "--lights",
+        "2",
+    )
+    cases += [
+        Case("capture: nothing to run", ("capture", "-o", "{tmp}/d"), ("--sim", "--config")),
+        Case(
+            "capture: --sim --scene teapot",
+            (*capture, "--scene", "teapot", "-o", "{tmp}/d"),
+            ("teapot",),
+        ),
+        Case("capture: --cameras 0", (*capture, "--cameras", "0", "-o", "{tmp}/d"), ("--cameras",)),
+        Case("capture: --size 0", (*capture, "--size", "0", "-o", "{tmp}/d"), ("--size",)),
+        Case(
+            "capture: --exposure-ms -1",
+            (*capture, "--exposure-ms", "-1", "-o", "{tmp}/d"),
+            ("--exposure-ms",),
+        ),
+        Case(
+            "capture: -o an existing dataset",
+            (*capture, "-o", "{dataset}"),
+            ("dataset", "resume it"),
+        ),
+        Case("capture: -o a file", (*capture, "-o", F + "existing.txt"), ("existing.txt",)),
+        Case("capture: --resume a missing one", ("capture", "--resume", "{tmp}/none"), ("none",)),
+        Case("capture: --resume a non-dataset", ("capture", "--resume", "{tmp}"), ("manifest",)),
+        Case(
+            "capture: --resume an emptied journal",
+            ("capture", "--resume", "{tmp}/dataset"),
+            ("journal",),
+            prepare=empty_journal,
+        ),
+        Case(
+            "capture: --resume another config",
+            ("capture", "--resume", "{tmp}/dataset", "--config", "docs/rig.example.toml"),
+            ("was captured with rig config", "would mix two set-ups"),
+            prepare=copy_dataset,
+        ),
+        Case(
+            "capture: missing --config",
+            (
+                "capture",
+                "--config",
+                "{tmp}/none.toml",
+                "--plan",
+                "docs/plan.example.toml",
+                "-o",
+                "{tmp}/d",
+            ),
+            ("none.toml",),
+        ),
+        Case(
+            "capture: --plan not TOML",
+            (
+                "capture",
+                "--config",
+                "docs/rig.example.toml",
+                "--plan",
+                F + "bad.toml",
+                "-o",
+                "{tmp}/d",
+            ),
+            ("bad.toml",),
+        ),
+    ]
+    # rig plan
+    cases += [
+        Case(
+            "plan: missing --config",
+            ("plan", "--config", "{tmp}/none.toml", "--plan", "docs/plan.example.toml"),
+            ("none.toml",),
+        ),
+        Case(
+            "plan: config not TOML",
+            ("plan", "--config", F + "bad.toml", "--plan", "docs/plan.example.toml"),
+            ("bad.toml",),
+        ),
+        Case(
+            "plan: zero-byte plan",
+            ("plan", "--config", "docs/rig.example.toml", "--plan", F + "zero.toml"),
+            ("zero.toml",),
+        ),
+        Case(
+            "plan: a 100000 x 100000 layout",
+            ("plan", "--config", "docs/rig.example.toml", "--plan", F + "huge-plan.toml"),
+            ("huge-plan.toml", "90000000 poses", "at most"),
+        ),
+        Case(
+            "plan: --advise a missing field",
+            ("plan", "--advise", "{tmp}/none.zarr", "--env", pano),
+            ("none.zarr",),
+        ),
+        Case("plan: --advise without --env", ("plan", "--advise", "{field}"), ("--env",)),
+        Case("plan: nothing", ("plan",), ("--config",)),
+    ]
+    # rig advise
+    advise = ("advise", "{field}", "--env", pano)
+    cases += [
+        Case("advise: missing field", ("advise", "{tmp}/none.zarr", "--env", pano), ("none.zarr",)),
+        Case("advise: --tolerance 0", (*advise, "--tolerance", "0"), ("--tolerance",)),
+        Case("advise: --samples 0", (*advise, "--samples", "0"), ("--samples",)),
+        Case(
+            "advise: zero-byte env",
+            ("advise", "{field}", "--env", F + "zero.hdr"),
+            ("zero.hdr", "empty"),
+        ),
+        Case(
+            "advise: --json a directory",
+            (*advise, "--json", "{tmp}/taken"),
+            ("taken", "directory"),
+            prepare=an_output_folder,
+        ),
+    ]
+    # rig export-lp
+    cases += [
+        Case(
+            "export-lp: missing dataset", ("export-lp", "{tmp}/none", "-o", "{tmp}/lp"), ("none",)
+        ),
+        Case(
+            "export-lp: -o an existing file",
+            ("export-lp", "{dataset}", "-o", F + "existing.txt"),
+            ("existing.txt", "not a directory"),
+        ),
+        Case(
+            "export-lp: -o under a file",
+            ("export-lp", "{dataset}", "-o", F + "existing.txt/lp"),
+            ("existing.txt", "not a directory"),
+        ),
+    ]
+    # rig calibrate
+    cases += [
+        Case("calibrate: missing dataset", ("calibrate", "{tmp}/none"), ("none",)),
+        Case(
+            "calibrate: no calibration captures",
+            ("calibrate", "{dataset}", "--dry-run"),
+            ("calibration",),
+        ),
+        Case(
+            "calibrate: --board 0x0",
+            ("calibrate", "{dataset}", "--board", "0x0"),
+            ("--board", "0x0"),
+        ),
+        Case(
+            "calibrate: --board abc",
+            ("calibrate", "{dataset}", "--board", "abc"),
+            ("--board", "abc"),
+        ),
+        Case(
+            "calibrate: --dictionary NOPE",
+            ("calibrate", "{dataset}", "--dictionary", "NOPE"),
+            ("NOPE",),
+        ),
+        Case(
+            "calibrate: --sphere-radius 0",
+            ("calibrate", "{dataset}", "--sphere-radius", "0"),
+            ("--sphere-radius",),
+        ),
+    ]
+    # rig doctor
+    cases += [
+        Case("doctor: missing --config", ("doctor", "--config", "{tmp}/none.toml"), ("none.toml",)),
+        Case("doctor: config not TOML", ("doctor", "--config", F + "bad.toml"), ("bad.toml",)),
+        Case(
+            "doctor: --exposure-ms -5",
+            ("doctor", "--config", "docs/rig.example.toml", "--exposure-ms", "-5"),
+            ("--exposure-ms",),
+        ),
+    ]
+    # rig sim
+    cases += [
+        Case(
+            "sim start: missing --config",
+            ("sim", "start", "--config", "{tmp}/none.toml"),
+            ("none.toml",),
+        ),
+        Case(
+            "sim start: --write-config a directory",
+            ("sim", "start", "--write-config", "{tmp}/taken"),
+            ("taken", "directory"),
+            prepare=an_output_folder,
+        ),
+        Case(
+            "sim start: --write-config an existing file",
+            ("sim", "start", "--write-config", F + "existing.txt"),
+            ("existing.txt", "exists"),
+        ),
+        Case(
+            "sim field: --lights 0", (*field, "--lights", "0", "-o", "{tmp}/f.zarr"), ("--lights",)
+        ),
+        Case(
+            "sim field: --scene teapot",
+            (*field, "--scene", "teapot", "-o", "{tmp}/f.zarr"),
+            ("teapot",),
+        ),
+        Case(
+            "sim field: --distance 0.5",
+            (*field, "--distance", "0.5", "-o", "{tmp}/f.zarr"),
+            ("inside the object",),
+        ),
+        Case(
+            "sim field: an existing store",
+            (*field, "-o", "{tmp}/field.zarr"),
+            ("field.zarr", "--overwrite"),
+            prepare=copy_field,
+        ),
+        Case(
+            "sim field: --size 100000x100000",
+            (*field, "--size", "100000x100000", "-o", "{tmp}/f.zarr"),
+            ("--size",),
+        ),
+        Case(
+            "sim field: --points 10^12",
+            (*field, "--points", "1000000000000", "-o", "{tmp}/f.zarr"),
+            ("1000000000000",),
+        ),
+        Case("sim render: -o .png", (*render[:-2], "-o", "{tmp}/gt.png"), ("gt.png", ".exr")),
+        Case("sim render: --grid -1", (*render, "--grid", "-1"), ("--grid",)),
+        Case(
+            "sim render: zero-byte env",
+            (
+                "sim",
+                "render",
+                "--scene",
+                "glossy-sphere",
+                "--env",
+                F + "zero.exr",
+                "--view",
+                "0,30",
+                "-o",
+                "{tmp}/gt.exr",
+            ),
+            ("zero.exr", "empty"),
+        ),
+        Case("sim render: --view 0", (*render, "--view", "0"), ("--view",)),
+        Case(
+            "sim photo: --light bad", (*photo, "--light", "x,y", "-o", "{tmp}/p.png"), ("--light",)
+        ),
+        Case("sim photo: -o .bmp", (*photo, "-o", "{tmp}/p.bmp"), ("p.bmp",)),
+        Case(
+            "sim photo: --exposure-time 0",
+            (*photo, "--exposure-time", "0", "-o", "{tmp}/p.png"),
+            ("--exposure-time",),
+        ),
+        Case(
+            "sim photo: --light-distance 0.5",
+            (*photo, "--light-distance", "0.5", "-o", "{tmp}/p.png"),
+            ("light", "0.5"),
+        ),
+        Case(
+            "sim photo: -o a directory",
+            (*photo, "-o", "{tmp}/out.png"),
+            ("out.png", "directory"),
+            prepare=an_output_folder,
+        ),
+    ]
+    # rig bench and rig demo
+    cases += [
+        Case("bench: -o a file", ("bench", "--quick", "-o", F + "existing.txt"), ("existing.txt",)),
+        Case("demo: -o a file", ("demo", "--quick", "-o", F + "existing.txt"), ("existing.txt",)),
+        Case(
+            "bench: --fields a file",
+            ("bench", "--quick", "-o", "{tmp}/b", "--fields", F + "existing.txt"),
+            ("existing.txt",),
+        ),
+    ]
+    return cases
+
+
+#: Every case of the sweep.
+CASES: tuple[Case, ...] = tuple(_cases())
+
+
+@contextlib.contextmanager
+def _workspace_in(root: Path) -> Iterator[Workspace]:
+    yield build_workspace(root)
+
+
+def sweep(root: Path) -> Counter[str]:
+    """Run every case in a workspace under ``root``; print each finding and the counts."""
+    counts: Counter[str] = Counter()
+    with _workspace_in(root / "workspace") as workspace:
+        for number, case in enumerate(CASES):
+            outcome = run_case(case, workspace, root / f"case-{number:03d}")
+            counts[outcome.kind] += 1
+            if outcome.kind != "clear":
+                print(f"[{outcome.kind}] {case.name}: {outcome.detail}")
+                print("    " + (outcome.err or outcome.out).strip().replace("\n", "\n    ")[:600])
+    print(f"{len(CASES)} cases: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    return counts
+
+
+if __name__ == "__main__":
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as scratch:
+        found = sweep(Path(scratch))
+    sys.exit(0 if set(found) <= {"clear"} else 1)

@@ -1,0 +1,74 @@
+"""Every bad input of the sweep (``tests/app/bad_inputs.py``) is a clear refusal.
+
+No traceback, no hang, nothing accepted silently, nothing left behind: each case exits with
+its status and a message naming the file or value (the README's promise).
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.cli import main
+from core.image_io import ImageFileError, read_linear, write_exr
+from tests.app.bad_inputs import CASES, Case, Workspace, build_workspace, run_case
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory: pytest.TempPathFactory) -> Workspace:
+    return build_workspace(tmp_path_factory.mktemp("bad-inputs"))
+
+
+@pytest.mark.parametrize("case", CASES, ids=[case.name for case in CASES])
+def test_a_bad_input_is_refused_clearly(case: Case, workspace: Workspace, tmp_path: Path) -> None:
+    outcome = run_case(case, workspace, tmp_path / "case")
+    assert outcome.kind == "clear", (
+        f"{outcome.kind}: {outcome.detail}\nstdout: {outcome.out}\nstderr: {outcome.err}"
+    )
+
+
+def test_the_sweep_covers_every_sub_command() -> None:
+    commands = {
+        case.argv[0] if case.argv[0] != "sim" else " ".join(case.argv[:2]) for case in CASES
+    }
+    assert commands >= {
+        "sample", "relight", "verify", "process", "capture", "plan", "advise", "export-lp",
+        "calibrate", "doctor", "sim start", "sim field", "sim render", "sim photo", "bench",
+        "demo",
+    }  # fmt: skip
+    assert len({case.name for case in CASES}) == len(CASES)
+
+
+def test_a_truncated_exr_prints_only_the_tools_message(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    # The OpenEXR library writes its own lines to the process's stderr before raising.
+    whole = tmp_path / "whole.exr"
+    write_exr(whole, np.ones((64, 128, 3), np.float32))
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.exr"
+    cut.write_bytes(data[: len(data) * 3 // 4])
+    with pytest.raises(ImageFileError, match=r"cut\.exr: cannot read as OpenEXR"):
+        read_linear(cut)
+    captured = capfd.readouterr()
+    assert captured.err == "" and captured.out == ""
+
+
+def test_a_torn_journal_is_reported_once_by_a_resume(
+    workspace: Workspace, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    caplog: pytest.LogCaptureFixture,
+) -> None:  # fmt: skip
+    dataset = tmp_path / "dataset"
+    shutil.copytree(workspace.dataset, dataset, ignore=shutil.ignore_patterns(".lock"))
+    journal = dataset / "journal.jsonl"
+    journal.write_bytes(journal.read_bytes()[:-30])  # a crash while writing the last line
+    assert main(["verify", str(dataset)]) == 0
+    assert "unfinished last line (a crash), ignored" in capsys.readouterr().out
+    assert main(["capture", "--resume", str(dataset), "--quiet"]) == 0
+    warnings = [r for r in caplog.records if "unfinished last line" in r.getMessage()]
+    assert len(warnings) == 1 and "removed" in warnings[0].getMessage()
+    assert main(["verify", str(dataset)]) == 0
+    assert "unfinished" not in capsys.readouterr().out
