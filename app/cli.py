@@ -23,11 +23,13 @@ from app.cli_args import (
     output_directory,
     output_file,
     positive,
+    require_output,
     whole,
 )
 from app.cli_bench import add_bench_parser
 from app.cli_calibrate import add_calibrate
 from app.cli_capture import add_capture
+from app.cli_evaluate import add_evaluate, relight_lights
 from app.cli_plan import add_plan
 from app.cli_process import add_process
 from app.cli_rig import add_doctor, add_sim_start
@@ -99,6 +101,7 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     from processing.interpolation import METHODS
     from processing.sample_models import MODELS
     from processing.sampling import SAMPLERS
+    from render.light_prediction import PREDICTORS
     from render.relight_mode import MOST_ACCURATE_MODELS
     from render.relighter import SCHEMES
 
@@ -113,7 +116,15 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument(
         "field", type=Path, help="reflectance field store, or an RTI .lp file (or its folder)"
     )
-    p.add_argument("--env", type=Path, required=True, help="panorama file")
+    p.add_argument("--env", type=Path, help="panorama file (or --lights)")
+    p.add_argument("--lights", type=Path, help="an .lp file: one image per line, relit under "
+                   "that directional light (camera frame), written into -o DIR")  # fmt: skip
+    p.add_argument("--method", choices=("auto", *PREDICTORS), default="auto",
+                   help="--lights: the method (default: the best on a held-out split of the "
+                   "field's lights)")  # fmt: skip
+    p.add_argument("--camera", type=whole, help="--lights on a field of points: the captured "
+                   "camera whose view is relit")  # fmt: skip
+    p.add_argument("--exr", action="store_true", help="--lights: also write linear OpenEXR")
     p.add_argument("--scheme", choices=(*SCHEMES, "model"), help="how the panorama lights the "
                    "field; model: through per-sample models fitted to it (default: the most "
                    "accurate, chosen by leave-one-light-out error)")  # fmt: skip
@@ -153,7 +164,8 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
         default="splat",
         help="draw the points with our splatter (default) or VTK (pyvista, .png only)",
     )
-    p.add_argument("-o", "--output", type=output_file, required=True, help=".exr/.png/.gif/.mp4")
+    p.add_argument("-o", "--output", type=Path, required=True,
+                   help=".exr/.png/.gif/.mp4 (--lights: a directory)")  # fmt: skip
     p.set_defaults(handler=_run_relight)
 
 
@@ -163,6 +175,12 @@ def _run_relight(args: argparse.Namespace) -> int:
     from processing.rti import open_field_or_rti
     from render.output import IMAGE_SUFFIXES, SEQUENCE_SUFFIXES
 
+    if (args.env is None) == (args.lights is None):
+        raise InputError("give --env PANORAMA (an environment) or --lights FILE.lp (lights)")
+    if args.lights is not None:
+        with open_field_or_rti(args.field, progress=True) as field:
+            return relight_lights(args, field)
+    require_output(args.output)  # a file, checked before the work
     suffix = args.output.suffix.lower()
     if suffix not in IMAGE_SUFFIXES + SEQUENCE_SUFFIXES:
         raise RigError(
@@ -578,6 +596,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_doctor(commands)
     add_plan(commands)
     add_advise(commands)
+    add_evaluate(commands)
     add_bench_parser(commands)
     add_capture(commands)
     add_calibrate(commands)

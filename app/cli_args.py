@@ -14,6 +14,7 @@ import os
 from pathlib import Path
 
 from core.atomic import output_problem
+from core.errors import InputError
 
 __all__ = [
     "IMAGE_BYTES_PER_PIXEL",
@@ -26,6 +27,7 @@ __all__ = [
     "output_directory",
     "output_file",
     "positive",
+    "require_output",
     "squares",
     "whole",
 ]
@@ -145,6 +147,17 @@ def _free_memory() -> int | None:
         return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (ValueError, OSError, AttributeError):
         return None
+
+
+def require_output(path: Path, *, directory: bool = False) -> Path:
+    """``path`` if it can be written (see :func:`core.atomic.output_problem`), else InputError.
+
+    For outputs whose kind (file or folder) only the other arguments tell.
+    """
+    problem = output_problem(path, directory=directory)
+    if problem is not None:
+        raise InputError(problem)
+    return path
 
 
 def output_file(text: str) -> Path:

@@ -12,6 +12,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 from tqdm import tqdm
 
 from core.camera_model import PinholeCamera
@@ -49,7 +50,7 @@ def simulate_field(
     path: str | os.PathLike[str],
     scene: str,
     *,
-    lights: int,
+    lights: int | NDArray[np.floating],
     cameras: list[PinholeCamera],
     points: int = 100_000,
     layout: str = "grid",
@@ -59,11 +60,17 @@ def simulate_field(
 ) -> Path:
     """Write the simulated field of ``scene`` to a new store at ``path``; returns the path.
 
-    ``overwrite`` replaces a store already there (and the model fit saved beside it).
+    ``lights`` is a count (directions of ``layout``) or the directions themselves (T, 3),
+    unit vectors in the rig frame: held-out test lights, say. ``overwrite`` replaces a store
+    already there (and the model fit saved beside it).
     """
     spec = get_scene(scene)
     samples = build_scene(scene, points)
-    light_directions = hemisphere_layout(lights, layout)
+    if isinstance(lights, int):
+        light_directions = hemisphere_layout(lights, layout)
+    else:
+        light_directions = np.asarray(lights, dtype=np.float64)
+        layout = "given"
     store = FieldStoreWriter(
         path,
         overwrite=overwrite,
@@ -83,7 +90,8 @@ def simulate_field(
     try:
         for s, camera in enumerate(cameras):
             store.write_visibility(s, camera_visibility(samples, camera))
-        steps = tqdm(total=lights * len(cameras), desc="field", unit="slab", disable=not progress)
+        total = len(light_directions) * len(cameras)
+        steps = tqdm(total=total, desc="field", unit="slab", disable=not progress)
         for t, direction in enumerate(light_directions):
             toward = (float(direction[0]), float(direction[1]), float(direction[2]))
             light = DirectionalLight(toward)

@@ -363,6 +363,35 @@ def other_field_models(workspace: Workspace, tmp: Path) -> None:
     del store
 
 
+def four_light_field(workspace: Workspace, tmp: Path) -> None:
+    """``four.zarr``: a field of 4 lights (too few to split)."""
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        main(
+            [
+                "sim",
+                "field",
+                "--scene",
+                "glossy-sphere",
+                "--lights",
+                "4",
+                "--cameras",
+                "3",
+                "--points",
+                "400",
+                "--size",
+                "32x32",
+                "-o",
+                str(tmp / "four.zarr"),
+            ]
+        )
+
+
+def two_lights_lp(workspace: Workspace, tmp: Path) -> None:
+    """``two.lp`` (two lights from above) and ``escape.lp`` (an entry naming ../x.png)."""
+    (tmp / "two.lp").write_text("2\na.png 0 0 1\nb.png 0.5 0 0.87\n")
+    (tmp / "escape.lp").write_text("1\n../x.png 0 0 1\n")
+
+
 def an_output_folder(workspace: Workspace, tmp: Path) -> None:
     """A non-empty folder where an output file or store is asked for."""
     (tmp / "out.png").mkdir()
@@ -1062,6 +1091,107 @@ def _cases() -> list[Case]:
             (*photo, "-o", "{tmp}/out.png"),
             ("out.png", "directory"),
             prepare=an_output_folder,
+        ),
+    ]
+    # rig evaluate and rig relight --lights
+    evaluate = ("evaluate", "{field}", "--quiet")
+    cases += [
+        Case(
+            "evaluate: missing field",
+            ("evaluate", "{tmp}/none.zarr", "--split", "rings"),
+            ("none.zarr", "no such"),
+        ),
+        Case(
+            "evaluate: neither --test nor --split",
+            evaluate,
+            ("one of the arguments --test --split is required",),
+        ),
+        Case(
+            "evaluate: unknown split", (*evaluate, "--split", "halves"), ("unknown split 'halves'",)
+        ),
+        Case(
+            "evaluate: unknown method",
+            (*evaluate, "--split", "rings", "--methods", "splines"),
+            ("--methods", "splines"),
+        ),
+        Case(
+            "evaluate: missing test .lp",
+            (*evaluate, "--test", "{tmp}/none.lp"),
+            ("none.lp", "no such"),
+        ),
+        Case(
+            "evaluate: a test that is neither",
+            (*evaluate, "--test", F + "existing.txt"),
+            ("existing.txt", ".lp file or a field store"),
+        ),
+        Case(
+            "evaluate: a mask on points",
+            (*evaluate, "--split", "rings", "--mask", F + "text.png"),
+            ("a mask applies to a field of pixels",),
+        ),
+        Case(
+            "evaluate: too few lights to split",
+            ("evaluate", "{tmp}/four.zarr", "--split", "every-other"),
+            ("each side needs 3 or more",),
+            prepare=four_light_field,
+        ),
+        Case(
+            "evaluate: --json a folder",
+            (*evaluate, "--split", "rings", "--json", "{tmp}/taken"),
+            ("taken", "directory"),
+            prepare=an_output_folder,
+        ),
+        Case(
+            "relight --lights: missing .lp",
+            ("relight", "{field}", "--lights", "{tmp}/none.lp", "-o", "{tmp}/out"),
+            ("none.lp", "no such"),
+        ),
+        Case(
+            "relight --lights: with --env too",
+            ("relight", "{field}", "--lights", F + "sky.exr", "--env", pano, "-o", "{tmp}/out"),
+            ("--env PANORAMA", "--lights FILE.lp"),
+        ),
+        Case(
+            "relight --lights: points without --camera",
+            ("relight", "{field}", "--lights", "{tmp}/two.lp", "-o", "{tmp}/out"),
+            ("--camera INDEX",),
+            prepare=two_lights_lp,
+        ),
+        Case(
+            "relight --lights: --camera 9",
+            ("relight", "{field}", "--lights", "{tmp}/two.lp", "--camera", "9", "-o", "{tmp}/out"),
+            ("--camera 9", "0..2"),
+            prepare=two_lights_lp,
+        ),
+        Case(
+            "relight --lights: an entry escaping -o",
+            (
+                "relight",
+                "{field}",
+                "--lights",
+                "{tmp}/escape.lp",
+                "--camera",
+                "0",
+                "-o",
+                "{tmp}/out",
+            ),
+            ("would be written outside",),
+            prepare=two_lights_lp,
+        ),
+        Case(
+            "relight --lights: -o a file",
+            (
+                "relight",
+                "{field}",
+                "--lights",
+                "{tmp}/two.lp",
+                "--camera",
+                "0",
+                "-o",
+                F + "existing.txt",
+            ),
+            ("existing.txt", "not a directory"),
+            prepare=two_lights_lp,
         ),
     ]
     # rig bench and rig demo

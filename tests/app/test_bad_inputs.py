@@ -35,9 +35,9 @@ def test_the_sweep_covers_every_sub_command() -> None:
         case.argv[0] if case.argv[0] != "sim" else " ".join(case.argv[:2]) for case in CASES
     }
     assert commands >= {
-        "sample", "relight", "verify", "process", "capture", "plan", "advise", "export-lp",
-        "calibrate", "doctor", "sim start", "sim field", "sim render", "sim photo", "bench",
-        "demo",
+        "sample", "relight", "verify", "process", "capture", "plan", "advise", "evaluate",
+        "export-lp", "calibrate", "doctor", "sim start", "sim field", "sim render", "sim photo",
+        "bench", "demo",
     }  # fmt: skip
     assert len({case.name for case in CASES}) == len(CASES)
 

@@ -1,0 +1,209 @@
+"""``rig evaluate`` (held-out lights, every method) and ``rig relight --lights`` (any light).
+
+Application layer: parses, opens the field and calls :mod:`render.evaluation` and
+:mod:`render.light_prediction`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+from app.cli_args import output_file, require_output
+from core.errors import InputError
+
+__all__ = ["add_evaluate", "relight_lights"]
+
+
+def add_evaluate(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``rig evaluate`` on the ``rig`` sub-command parser."""
+    from render.evaluation import SPLITS
+    from render.light_prediction import PREDICTORS
+
+    p = commands.add_parser(
+        "evaluate",
+        help="score every relighting method on held-out lights (PSNR, SSIM, dE2000, RMSE)",
+        description="Predict lights the methods never saw and compare with the measured "
+        "images, as the RTI literature does: the test images of an .lp file (or a field "
+        "store of the same views under other lights), or a split of the field's own lights. "
+        "Prints a table (best PSNR first); --json and --markdown save it. Methods: "
+        + ", ".join(PREDICTORS)
+        + ".",
+    )
+    p.add_argument("field", type=Path, help="field store or RTI capture (.lp or its folder)")
+    test = p.add_mutually_exclusive_group(required=True)
+    test.add_argument("--test", type=Path, help="test lights: an .lp file, or a field store")
+    test.add_argument(
+        "--split",
+        help=f"hold out part of the field's own lights: {', '.join(SPLITS)} (random:SEED)",
+    )
+    p.add_argument(
+        "--methods",
+        type=_methods,
+        default=PREDICTORS,
+        help="comma-separated methods (default: every one)",
+    )
+    p.add_argument("--mask", type=Path, help="pixel fields: image whose non-zero pixels count")
+    p.add_argument("--json", type=output_file, help="write every score here (JSON)")
+    p.add_argument("--markdown", type=output_file, help="write the table here (Markdown)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_run_evaluate)
+
+
+def _methods(text: str) -> tuple[str, ...]:
+    from render.light_prediction import PREDICTORS
+
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = [name for name in names if name not in PREDICTORS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown method(s) {', '.join(unknown) or text!r}; use {', '.join(PREDICTORS)}"
+        )
+    return names
+
+
+def _read_mask(path: Path, shape: tuple[int, int] | None) -> Any:
+    import numpy as np
+
+    from core.image_io import read_pixels
+
+    if shape is None:
+        raise InputError(f"{path}: a mask applies to a field of pixels (an RTI capture)")
+    pixels = np.asarray(read_pixels(path))
+    mask = (pixels.reshape(*pixels.shape[:2], -1) > 0).any(axis=2)
+    if mask.shape != shape:
+        raise InputError(f"{path}: the mask is {mask.shape[1]}x{mask.shape[0]}, the images are "
+                         f"{shape[1]}x{shape[0]}")  # fmt: skip
+    if not mask.any():
+        raise InputError(f"{path}: the mask selects no pixel")
+    return mask
+
+
+def _run_evaluate(args: argparse.Namespace) -> int:
+    from core.atomic import atomic_path, write_json_atomic
+    from core.field_store import ReflectanceField, is_field_store
+    from processing.rti import open_field_or_rti
+    from render.evaluation import evaluate, split_lights, test_field_from_lp
+
+    with open_field_or_rti(args.field, progress=not args.quiet) as field:
+        mask = None if args.mask is None else _read_mask(args.mask, field.image_shape)
+        if args.split is not None:
+            fit_index, test_index = split_lights(field, args.split)
+            fit, test = field.subset(lights=fit_index), field.subset(lights=test_index)
+            names = [f"light {int(t)}" for t in test_index]
+            where = f"split {args.split}"
+        else:
+            fit, names, where = field, None, str(args.test)
+            if is_field_store(args.test):
+                test = ReflectanceField.open(args.test)
+            elif args.test.suffix.lower() == ".lp":
+                test = test_field_from_lp(args.test)
+                names = _lp_names(args.test)
+            else:
+                raise InputError(f"{args.test}: give an .lp file or a field store")
+        result = evaluate(
+            fit, test, args.methods, mask=mask, test_names=names, progress=not args.quiet
+        )
+    result = dataclasses.replace(result, field=str(args.field), test=where)
+    table = result.markdown()
+    print(table, end="")
+    best = result.best()
+    print(f"best: {best.name}")
+    if args.json is not None:
+        write_json_atomic(args.json, result.to_json())
+    if args.markdown is not None:
+        with atomic_path(args.markdown) as temporary:
+            temporary.write_text(table, encoding="utf-8")
+    return 0
+
+
+def _lp_names(path: Path) -> list[str]:
+    from processing.rti import read_lp
+
+    return list(read_lp(path).files)
+
+
+#: Methods ``rig relight --lights`` chooses among by a held-out split of the field's lights.
+AUTO_CANDIDATES = ("barycentric", "rbf", "lambert+residual", "lambert+ggx+residual")
+
+
+def relight_lights(args: argparse.Namespace, field: Any) -> int:
+    """``rig relight FIELD --lights FILE.lp -o DIR``: one image per line of the ``.lp`` file.
+
+    The directions are in the camera frame of the field's view (a pixel field's camera, or
+    ``--camera INDEX`` of a point field); each image is written as ``DIR/<entry>.png`` (8-bit
+    sRGB) and, with ``--exr``, ``DIR/<entry>.exr`` (linear), ``<entry>`` the ``.lp`` file
+    name without its suffix.
+    """
+    import numpy as np
+
+    from core.camera_model import camera_to_rig
+    from core.image_io import write_exr, write_srgb8
+    from processing.image_quality import display_8bit, display_scale
+    from processing.rti import read_lp
+    from render.evaluation import evaluate, split_lights
+    from render.light_prediction import make_predictor
+
+    directory = require_output(args.output, directory=True)
+    lights = read_lp(args.lights)
+    stems = [_entry_stem(directory, name, args.lights) for name in lights.files]
+    if field.sample_kind == "pixels":
+        camera = 0
+    else:
+        if args.camera is None:
+            raise InputError(f"{args.field} is a field of points: name a captured --camera INDEX")
+        camera = args.camera
+        if not 0 <= camera < field.shape[0]:
+            raise InputError(f"--camera {camera}: {args.field} has cameras 0..{field.shape[0] - 1}")
+    method = args.method
+    if method == "auto":
+        fit_index, test_index = split_lights(field, "every-other")
+        trial = evaluate(
+            field.subset(lights=fit_index), field.subset(lights=test_index), AUTO_CANDIDATES
+        )
+        method = trial.best().name
+        print(f"method: {method} (best held-out PSNR on every other light of the field)")
+    predictor = make_predictor(field, method, progress=True)
+    directions = camera_to_rig(lights.directions, field.cameras[camera])
+    predicted = predictor.predict(camera, directions)
+    scale = (
+        1.0
+        if field.provenance.get("source") == "rti"
+        else display_scale(field.camera_slab(camera)[:, field.visibility[camera]])
+    )
+    views = _image_maker(field, camera)
+    for stem, values in zip(stems, predicted, strict=True):
+        image = views(values)
+        write_srgb8(stem.with_suffix(".png"), display_8bit(image, scale))
+        if args.exr:
+            write_exr(stem.with_suffix(".exr"), np.asarray(image, dtype=np.float32))
+    print(f"{len(lights)} images under {args.lights} ({method}) -> {directory}/")
+    return 0
+
+
+def _entry_stem(directory: Path, name: str, lp: Path) -> Path:
+    """Where the image of ``.lp`` entry ``name`` goes (no suffix); never outside ``directory``."""
+    relative = Path(name.replace("\\", "/")).with_suffix("")
+    if relative.is_absolute() or ".." in relative.parts:
+        raise InputError(
+            f"{lp}: entry {name!r} would be written outside {directory}; name images by "
+            "relative paths inside the output folder"
+        )
+    return directory / relative
+
+
+def _image_maker(field: Any, camera: int) -> Any:
+    """Values (P, 3) of one camera to its image (H, W, 3)."""
+    import numpy as np
+
+    from core.point_spacing import point_spacing
+    from render.splat import plan_splats, splat
+
+    if field.image_shape is not None:
+        return lambda values: np.asarray(values).reshape(*field.image_shape, 3)
+    plan = plan_splats(
+        field.points, field.normals, field.cameras[camera], point_spacing(field.points)
+    )
+    return lambda values: splat(plan, values)

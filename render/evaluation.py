@@ -1,0 +1,336 @@
+"""Held-out-light evaluation: every method predicts lights it never saw, as the RTI literature does.
+
+A field is split into the lights a method may use (the fit lights) and the lights it must
+predict (the test lights), or a second capture of other lights is given as the test. Each
+method (:mod:`render.light_prediction`) predicts every test image from the fit lights alone,
+and :mod:`processing.image_quality` scores it against the measured image: PSNR and SSIM of the
+8-bit sRGB images, mean CIEDE2000, relative RMSE in linear light. Means are over the test
+images (per-image PSNR averaged, as NeuralRTI's evaluation does).
+
+Images: a field of pixels is its one view; a field of points is splatted into each captured
+camera's image (:func:`render.splat.plan_splats`), the metrics taken over the pixels it covers.
+
+Display range of the 8-bit metrics: an RTI capture's values are its images' decoded 8-bit
+values, so white is 1; a simulated (HDR) field is scaled so that the test images'
+99.5th percentile is white (:func:`processing.image_quality.display_scale`), once for all
+methods.
+
+Splits of one capture (``split``):
+
+``every-other``
+    test every second light in the field's order (the fit lights surround each test light);
+``rings``
+    the lights grouped into rings of equal inclination (in the camera frame for pixel fields),
+    test every second ring: a harder gap, a whole ring unseen;
+``random``
+    half the lights at random (``random:SEED`` picks the seed; default 0).
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from tqdm import tqdm
+
+from core.camera_model import rig_to_camera
+from core.errors import InputError, RigError
+from core.field_store import ReflectanceField
+from core.point_spacing import point_spacing
+from processing.image_quality import ImageQuality, display_scale, image_quality
+from processing.rti import import_rti
+from render.light_prediction import PREDICTORS, make_predictor
+from render.splat import plan_splats, splat
+
+__all__ = [
+    "SPLITS",
+    "Evaluation",
+    "MethodResult",
+    "evaluate",
+    "ring_groups",
+    "split_lights",
+    "test_field_from_lp",
+]
+
+#: Ways :func:`split_lights` splits one capture.
+SPLITS = ("every-other", "rings", "random")
+#: Inclinations closer than this (degrees) belong to one ring.
+RING_GAP_DEG = 2.0
+
+
+def ring_groups(field: ReflectanceField) -> NDArray[np.int64]:
+    """The ring of each light (T,): rings of equal inclination, numbered from the top."""
+    directions = field.light_directions
+    if field.sample_kind == "pixels":
+        directions = rig_to_camera(directions, field.cameras[0])
+    inclination = np.degrees(np.arccos(np.clip(directions[:, 2], -1.0, 1.0)))
+    order = np.argsort(inclination)
+    ring = np.zeros(len(order), dtype=np.int64)
+    ring[order] = np.concatenate([[0], np.cumsum(np.diff(inclination[order]) > RING_GAP_DEG)])
+    return ring
+
+
+def split_lights(field: ReflectanceField, how: str) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The fit and test light indices of one capture (see the module's splits).
+
+    Raises
+    ------
+    InputError
+        An unknown split, or one that leaves fewer than 3 lights on either side.
+    """
+    t = field.shape[1]
+    name, _, seed = how.partition(":")
+    index = np.arange(t, dtype=np.int64)
+    if name == "every-other":
+        test = index[1::2]
+    elif name == "rings":
+        ring = ring_groups(field)
+        if ring.max() < 1:
+            raise InputError(f"{field.path}: the lights form one ring; use another split")
+        test = index[ring % 2 == 1]
+    elif name == "random":
+        try:
+            rng = np.random.default_rng(int(seed or 0))
+        except ValueError:
+            raise InputError(f"random:SEED needs a whole number, got {how!r}") from None
+        test = np.sort(rng.choice(index, size=t // 2, replace=False))
+    else:
+        raise InputError(f"unknown split {how!r}; use one of {', '.join(SPLITS)} (random:SEED)")
+    fit = np.setdiff1d(index, test)
+    if min(len(fit), len(test)) < 3:
+        raise InputError(
+            f"{field.path}: split {how!r} of {t} lights leaves {len(fit)} to fit and "
+            f"{len(test)} to test; each side needs 3 or more"
+        )
+    return fit, test
+
+
+def test_field_from_lp(lp_path: str | Path) -> ReflectanceField:
+    """The test images of an ``.lp`` file (and its images) as a field held in memory."""
+    with tempfile.TemporaryDirectory(prefix="rig-evaluate-") as scratch:
+        store = import_rti(lp_path, Path(scratch) / "test.zarr", progress=False)
+        return store.subset()  # in memory: the temporary store goes
+
+
+@dataclass(frozen=True)
+class MethodResult:
+    """One method's predictions of the test images.
+
+    Attributes
+    ----------
+    name : str
+    mean : ImageQuality or None, the means over the test images (None: not applicable)
+    per_image : tuple of ImageQuality, in test-image order (camera-major)
+    seconds : float, fitting the method and predicting every test image
+    predict_ms : float, milliseconds to predict one more image once fitted
+    note : str, why the method does not apply, or what it chose (sigma)
+    """
+
+    name: str
+    mean: ImageQuality | None
+    per_image: tuple[ImageQuality, ...]
+    seconds: float
+    predict_ms: float
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Every method's held-out-light scores on one field."""
+
+    field: str
+    test: str
+    fit_lights: int
+    test_lights: int
+    cameras: int
+    scale: float
+    test_names: tuple[str, ...]
+    methods: tuple[MethodResult, ...]
+
+    def best(self) -> MethodResult:
+        """The method of the highest mean PSNR."""
+        scored = [m for m in self.methods if m.mean is not None]
+        if not scored:
+            raise InputError("no method could be evaluated")
+        return max(scored, key=lambda m: m.mean.psnr if m.mean is not None else -math.inf)
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready document: the set-up, then per method its means and per-image scores."""
+        return {
+            "field": self.field,
+            "test": self.test,
+            "fit_lights": self.fit_lights,
+            "test_lights": self.test_lights,
+            "cameras": self.cameras,
+            "display_scale": self.scale,
+            "test_images": list(self.test_names),
+            "methods": {
+                m.name: {
+                    "mean": None if m.mean is None else m.mean.to_dict(),
+                    "per_image": [q.to_dict() for q in m.per_image],
+                    "seconds": m.seconds,
+                    "predict_ms": m.predict_ms,
+                    "note": m.note,
+                }
+                for m in self.methods
+            },
+        }
+
+    def markdown(self) -> str:
+        """A Markdown table of the means, best PSNR first."""
+        lines = [
+            f"Held-out lights: {self.test_lights} test lights predicted from {self.fit_lights} "
+            f"({self.cameras} camera{'s' if self.cameras != 1 else ''}); field {self.field}, "
+            f"test {self.test}.",
+            "",
+            "| method | PSNR (dB) | SSIM | ΔE2000 | rel. RMSE | all (s) | one more (ms) | note |",
+            "|---|---:|---:|---:|---:|---:|---:|---|",
+        ]
+        ranked = sorted(
+            self.methods, key=lambda m: -(m.mean.psnr if m.mean is not None else -math.inf)
+        )
+        for m in ranked:
+            if m.mean is None:
+                lines.append(f"| {m.name} | | | | | | | {m.note} |")
+                continue
+            q = m.mean
+            lines.append(
+                f"| {m.name} | {q.psnr:.2f} | {q.ssim:.4f} | {q.delta_e:.2f} | "
+                f"{q.rel_rmse:.2%} | {m.seconds:.2f} | {m.predict_ms:.1f} | {m.note} |"
+            )
+        return "\n".join(lines) + "\n"
+
+
+def _check_pair(fit: ReflectanceField, test: ReflectanceField) -> None:
+    s, _, p = fit.shape
+    ts, _, tp = test.shape
+    if (s, p) != (ts, tp) or fit.sample_kind != test.sample_kind:
+        raise InputError(
+            f"{test.path} does not match {fit.path}: {ts} cameras x {tp} {test.sample_kind} "
+            f"against {s} x {p} {fit.sample_kind}; the test images must be of the same view(s)"
+        )
+    if fit.image_shape != test.image_shape:
+        raise InputError(f"{test.path}: images {test.image_shape}, the field's {fit.image_shape}")
+    if not np.allclose(fit.camera_directions, test.camera_directions, atol=1e-6):
+        raise InputError(f"{test.path}: its cameras are not the field's")
+
+
+class _Views:
+    """How a camera's sample values become an image, and which pixels count."""
+
+    def __init__(self, field: ReflectanceField, mask: NDArray[np.bool_] | None) -> None:
+        self.field = field
+        self.mask = mask
+        self._plans: dict[int, Any] = {}
+        self._spacing: float | None = None
+
+    def image(self, camera: int, values: NDArray[np.floating]) -> NDArray[np.float32]:
+        f = self.field
+        if f.image_shape is not None:
+            return np.asarray(values, dtype=np.float32).reshape(*f.image_shape, 3)
+        return splat(self._plan(camera), values)
+
+    def pixels(self, camera: int) -> NDArray[np.bool_]:
+        f = self.field
+        if f.image_shape is not None:
+            seen = f.visibility[camera].reshape(f.image_shape)
+            return seen if self.mask is None else seen & self.mask
+        return np.asarray(self._plan(camera).coverage, dtype=bool)
+
+    def _plan(self, camera: int) -> Any:
+        if camera not in self._plans:
+            f = self.field
+            assert f.points is not None and f.normals is not None
+            if self._spacing is None:
+                self._spacing = point_spacing(f.points)
+            self._plans[camera] = plan_splats(f.points, f.normals, f.cameras[camera], self._spacing)
+        return self._plans[camera]
+
+
+def evaluate(
+    fit: ReflectanceField,
+    test: ReflectanceField,
+    methods: Sequence[str] = PREDICTORS,
+    *,
+    scale: float | None = None,
+    mask: NDArray[np.bool_] | None = None,
+    test_names: Sequence[str] | None = None,
+    progress: bool = False,
+) -> Evaluation:
+    """Score every method's predictions of ``test``'s lights from ``fit``'s.
+
+    Parameters
+    ----------
+    fit : ReflectanceField, the lights the methods may use
+    test : ReflectanceField, the same cameras and samples under the lights to predict
+    methods : names of :data:`render.light_prediction.PREDICTORS`
+    scale : float, optional, the linear value of 8-bit white (default: see the module)
+    mask : ndarray (H, W) of bool, optional (pixel fields), the pixels that count
+    test_names : names of the test lights (default ``light N``)
+    progress : bool, a bar over the methods
+
+    Returns
+    -------
+    Evaluation; a method that cannot apply (a basis on too few lights) has ``mean`` None and
+    says why in its note.
+    """
+    _check_pair(fit, test)
+    if fit.image_shape is None and mask is not None:
+        raise InputError("a mask applies to a field of pixels")
+    s_count, t_test, _ = test.shape
+    views = _Views(test, mask)
+    truth = {s: test.camera_slab(s) for s in range(s_count)}
+    images = {(s, q): views.image(s, truth[s][q]) for s in range(s_count) for q in range(t_test)}
+    if scale is None:
+        rti = fit.provenance.get("source") == "rti" or test.provenance.get("source") == "rti"
+        stack = np.concatenate([images[key][views.pixels(key[0])] for key in images])
+        scale = 1.0 if rti else display_scale(stack)
+    results = []
+    for name in tqdm(methods, desc="evaluate", unit="method", disable=not progress):
+        start = time.perf_counter()
+        try:
+            predictor = make_predictor(fit, name, scale=scale)
+            predicted = {s: predictor.predict(s, test.light_directions) for s in range(s_count)}
+        except RigError as error:
+            results.append(MethodResult(name, None, (), 0.0, 0.0, f"not applicable: {error}"))
+            continue
+        elapsed = time.perf_counter() - start
+        again = time.perf_counter()  # fitted now: what one more image costs
+        predictor.predict(0, test.light_directions[:1])
+        per_image_ms = 1000.0 * (time.perf_counter() - again)
+        scores = tuple(
+            image_quality(
+                views.image(s, predicted[s][q]), images[s, q], views.pixels(s), scale=scale
+            )
+            for s in range(s_count)
+            for q in range(t_test)
+        )
+        mean = ImageQuality(
+            psnr=float(np.mean([q.psnr for q in scores])),
+            ssim=float(np.mean([q.ssim for q in scores])),
+            delta_e=float(np.mean([q.delta_e for q in scores])),
+            rel_rmse=float(np.mean([q.rel_rmse for q in scores])),
+        )
+        sigma = getattr(predictor, "sigma", None)
+        note = f"sigma {sigma:.3g}" if isinstance(sigma, float) else ""
+        results.append(MethodResult(name, mean, scores, elapsed, per_image_ms, note))
+    names = (
+        tuple(test_names) if test_names is not None else tuple(f"light {q}" for q in range(t_test))
+    )
+    return Evaluation(
+        field=str(fit.path),
+        test=str(test.path),
+        fit_lights=fit.shape[1],
+        test_lights=t_test,
+        cameras=s_count,
+        scale=float(scale),
+        test_names=names,
+        methods=tuple(results),
+    )

@@ -1,0 +1,136 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.camera_model import PinholeCamera, camera_to_rig
+from core.directions import hemisphere_layout
+from core.errors import InputError
+from core.field_store import FieldStoreWriter, ReflectanceField
+from processing.sample_models import evaluate_basis
+from render.light_prediction import (
+    BOUND,
+    PREDICTORS,
+    RBF_SIGMAS,
+    choose_rbf_sigma,
+    make_predictor,
+    rbf_weights,
+)
+from sim.field import field_cameras, simulate_field
+
+HEIGHT, WIDTH = 4, 6
+
+
+def _pixel_field(path: Path, values_of: object, lights: int = 40) -> ReflectanceField:
+    """A field of pixels whose radiance is ``values_of(camera-frame directions)`` (T, P, 3)."""
+    camera = PinholeCamera(0.0, 0.0, 10.0, 10.0, WIDTH, HEIGHT)
+    directions = hemisphere_layout(lights, "fibonacci")
+    values = values_of(directions)  # type: ignore[operator]
+    writer = FieldStoreWriter(
+        path, points=None, normals=None, light_directions=camera_to_rig(directions, camera),
+        cameras=[camera], image_shape=(HEIGHT, WIDTH),
+    )  # fmt: skip
+    for t in range(lights):
+        writer.write_slab(0, t, values[t].astype(np.float32))
+    writer.write_visibility(0, np.ones(HEIGHT * WIDTH, dtype=bool))
+    writer.finish()
+    return ReflectanceField.open(path)
+
+
+def _polynomial(name: str, seed: int = 0) -> object:
+    coefficients = np.random.default_rng(seed).uniform(0.1, 0.3, (HEIGHT * WIDTH, 9, 3))
+
+    def values(directions: np.ndarray) -> np.ndarray:
+        design = evaluate_basis(name, directions)
+        return np.einsum("tb,pbc->tpc", design, coefficients[:, : design.shape[1]])
+
+    return values
+
+
+@pytest.mark.parametrize("name", ["ptm", "hsh3"])
+def test_a_basis_predicts_its_own_kind_exactly(tmp_path: Path, name: str) -> None:
+    field = _pixel_field(tmp_path / "f.zarr", _polynomial(name))
+    new = hemisphere_layout(7, "grid")
+    truth = _polynomial(name)(new)  # type: ignore[operator]
+    predicted = make_predictor(field, name).predict(0, camera_to_rig(new, field.cameras[0]))
+    # Exact up to the bound (values above 1.25 x the brightest measured are clipped).
+    np.testing.assert_allclose(predicted, np.clip(truth, 0, None), rtol=1e-4, atol=1e-5)
+
+
+def test_interpolators_reproduce_the_measured_lights(tmp_path: Path) -> None:
+    field = _pixel_field(tmp_path / "f.zarr", _polynomial("ptm", seed=1))
+    slab = field.camera_slab(0)
+    # Interpolators and model + residual are exact at the measured lights (the latter up to
+    # the bound: these random polynomials dip below zero, which light cannot); a least-squares
+    # fit of the data's own kind is exact too.
+    for name, expected in (("nearest", slab), ("barycentric", slab), ("ptm", np.maximum(slab, 0)),
+                           ("lambert+residual", np.maximum(slab, 0))):  # fmt: skip
+        predicted = make_predictor(field, name).predict(0, field.light_directions)
+        np.testing.assert_allclose(predicted, expected, atol=1e-5, err_msg=name)
+
+
+def test_rbf_weights_are_the_rti_tools_normalised_gaussian() -> None:
+    measured = hemisphere_layout(30, "fibonacci")
+    queries = hemisphere_layout(5, "grid")
+    weights = rbf_weights(measured, queries, 0.2)
+    np.testing.assert_allclose(weights.sum(axis=1), 1.0)
+    assert ((weights == 0) | (weights >= 1e-3 * 0.5)).all()  # tiny weights dropped
+    nearest = np.argmax(queries @ measured.T, axis=1)
+    sharp = rbf_weights(measured, queries, 1e-3)  # sigma -> 0: the nearest light alone
+    np.testing.assert_allclose(sharp[np.arange(5), nearest], 1.0)
+    with pytest.raises(InputError, match="sigma must be positive"):
+        rbf_weights(measured, queries, 0.0)
+
+
+def test_the_rbf_width_follows_the_data() -> None:
+    lights = hemisphere_layout(60, "fibonacci")
+    # A smooth function of the light is predicted best from its neighbours; values drawn
+    # independently per light, best by the mean of all the others (the widest kernel).
+    smooth = lights[:, 2:3] * np.ones((1, 50))
+    rough = np.random.default_rng(0).random((60, 50))
+    assert choose_rbf_sigma(lights, smooth) < RBF_SIGMAS[-1] == choose_rbf_sigma(lights, rough)
+
+
+def test_predictions_are_bounded_by_the_data(tmp_path: Path) -> None:
+    # A lobe-like field: the linear bases overshoot it between lights and below zero.
+    def spiky(directions: np.ndarray) -> np.ndarray:
+        lobe = np.exp(-np.sum((directions - [0.3, 0.2, 0.93]) ** 2, axis=1) / 0.02)
+        return np.repeat(lobe[:, None, None], HEIGHT * WIDTH, axis=1) * np.ones(3)
+
+    field = _pixel_field(tmp_path / "f.zarr", spiky)
+    peak = field.camera_slab(0).max()
+    queries = camera_to_rig(hemisphere_layout(50, "grid"), field.cameras[0])
+    for name in ("ptm", "hsh3", "ptm-8bit", "lambert+ggx", "lambert+ggx+residual"):
+        predicted = make_predictor(field, name).predict(0, queries)
+        assert predicted.min() >= 0 and predicted.max() <= BOUND * peak + 1e-6, name
+
+
+def test_the_models_predict_a_simulated_field_of_their_own_kind(tmp_path: Path) -> None:
+    path = tmp_path / "diffuse.zarr"
+    cameras = field_cameras(4, width=24, height=24)
+    simulate_field(path, "diffuse-sphere", lights=24, cameras=cameras, points=400)
+    test_path = tmp_path / "diffuse-test.zarr"
+    field = ReflectanceField.open(path)
+    new = hemisphere_layout(5, "fibonacci")  # lights the field did not measure
+    simulate_field(test_path, "diffuse-sphere", lights=new, cameras=cameras, points=400)
+    test = ReflectanceField.open(test_path)
+    for s in range(4):
+        seen = field.visibility[s]
+        truth = test.camera_slab(s)[:, seen]
+        for name, tolerance in (("lambert", 0.05), ("barycentric", 0.3)):
+            predicted = make_predictor(field, name).predict(s, new)[:, seen]
+            error = np.sqrt(np.sum((predicted - truth) ** 2) / np.sum(truth**2))
+            assert error < tolerance, (name, s, error)
+
+
+def test_every_method_has_a_predictor_and_unknown_ones_are_refused(tmp_path: Path) -> None:
+    field = _pixel_field(tmp_path / "f.zarr", _polynomial("hsh3", seed=2))
+    direction = field.light_directions[:1]
+    for name in PREDICTORS:
+        predictor = make_predictor(field, name)
+        assert predictor.name == name
+        assert predictor.predict(0, direction).shape == (1, HEIGHT * WIDTH, 3)
+    with pytest.raises(InputError, match="unknown method 'splines'"):
+        make_predictor(field, "splines")
