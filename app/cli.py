@@ -29,7 +29,7 @@ from app.cli_args import (
 from app.cli_bench import add_bench_parser
 from app.cli_calibrate import add_calibrate
 from app.cli_capture import add_capture
-from app.cli_evaluate import add_evaluate, relight_lights
+from app.cli_evaluate import add_evaluate, add_transfer_option, relight_lights
 from app.cli_plan import add_plan
 from app.cli_process import add_process
 from app.cli_rig import add_doctor, add_sim_start
@@ -125,6 +125,7 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--camera", type=whole, help="--lights on a field of points: the captured "
                    "camera whose view is relit")  # fmt: skip
     p.add_argument("--exr", action="store_true", help="--lights: also write linear OpenEXR")
+    add_transfer_option(p)
     p.add_argument("--scheme", choices=(*SCHEMES, "model"), help="how the panorama lights the "
                    "field; model: through per-sample models fitted to it (default: the most "
                    "accurate, chosen by leave-one-light-out error)")  # fmt: skip
@@ -178,7 +179,7 @@ def _run_relight(args: argparse.Namespace) -> int:
     if (args.env is None) == (args.lights is None):
         raise InputError("give --env PANORAMA (an environment) or --lights FILE.lp (lights)")
     if args.lights is not None:
-        with open_field_or_rti(args.field, progress=True) as field:
+        with open_field_or_rti(args.field, progress=True, transfer=args.transfer) as field:
             return relight_lights(args, field)
     require_output(args.output)  # a file, checked before the work
     suffix = args.output.suffix.lower()
@@ -190,7 +191,7 @@ def _run_relight(args: argparse.Namespace) -> int:
     if panorama.note:
         print(panorama.note)
     modulation = None if args.modulation is None else read_modulation_map(args.modulation)
-    with open_field_or_rti(args.field, progress=True) as field:
+    with open_field_or_rti(args.field, progress=True, transfer=args.transfer) as field:
         return _relight_field(args, field, panorama, modulation, suffix)
 
 

@@ -14,7 +14,19 @@ from typing import Any
 from app.cli_args import output_file, require_output
 from core.errors import InputError
 
-__all__ = ["add_evaluate", "relight_lights"]
+__all__ = ["add_evaluate", "add_transfer_option", "relight_lights"]
+
+
+def add_transfer_option(p: argparse.ArgumentParser) -> None:
+    """``--transfer``: how an RTI capture's images are decoded (its import says what it did)."""
+    p.add_argument(
+        "--transfer",
+        choices=("auto", "srgb", "linear"),
+        default="auto",
+        help="RTI captures: decode the images as sRGB or as linear values (default auto: 8-bit "
+        "sRGB, 16-bit and float linear); a mask (FILE.mask.png or mask.png) and intensities "
+        "(a fifth .lp column or FILE.intensities) beside the .lp are used (docs/processing.md)",
+    )
 
 
 def add_evaluate(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -49,6 +61,7 @@ def add_evaluate(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--json", type=output_file, help="write every score here (JSON)")
     p.add_argument("--markdown", type=output_file, help="write the table here (Markdown)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_transfer_option(p)
     p.set_defaults(handler=_run_evaluate)
 
 
@@ -87,7 +100,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     from processing.rti import open_field_or_rti
     from render.evaluation import evaluate, split_lights, test_field_from_lp
 
-    with open_field_or_rti(args.field, progress=not args.quiet) as field:
+    with open_field_or_rti(args.field, progress=not args.quiet, transfer=args.transfer) as field:
         mask = None if args.mask is None else _read_mask(args.mask, field.image_shape)
         if args.split is not None:
             fit_index, test_index = split_lights(field, args.split)
@@ -99,7 +112,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
             if is_field_store(args.test):
                 test = ReflectanceField.open(args.test)
             elif args.test.suffix.lower() == ".lp":
-                test = test_field_from_lp(args.test)
+                test = test_field_from_lp(args.test, transfer=args.transfer)
                 names = _lp_names(args.test)
             else:
                 raise InputError(f"{args.test}: give an .lp file or a field store")
@@ -126,7 +139,7 @@ def _lp_names(path: Path) -> list[str]:
 
 
 #: Methods ``rig relight --lights`` chooses among by a held-out split of the field's lights.
-AUTO_CANDIDATES = ("barycentric", "rbf", "lambert+residual", "lambert+ggx+residual")
+AUTO_CANDIDATES = ("barycentric", "rbf", "lambert+ggx+residual", "adaptive")
 
 
 def relight_lights(args: argparse.Namespace, field: Any) -> int:

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from bench.advisor import advisor_chart
+from bench.held_out import held_out_chart
 from bench.report_aggregate import pareto_front
 from bench.report_charts import CHARTS, draw_charts
 from bench.report_sections import report_sections
@@ -44,6 +45,8 @@ def write_report(
     front = draw_charts(results, directory)
     if results.get("advisor"):
         advisor_chart(results["advisor"], directory / "advisor.png")
+    if results.get("held_out"):
+        held_out_chart(results["held_out"], directory / "held_out.png")
     lines = [
         "# Relighting: speed against accuracy",
         "",

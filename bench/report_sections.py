@@ -9,6 +9,7 @@ stability study's sections, whose tables their modules format (:mod:`bench.advis
 from __future__ import annotations
 
 from bench.advisor import format_advisor
+from bench.held_out import format_held_out
 from bench.report_markdown import markdown_table, ratio
 from bench.report_studies import study_sections
 from bench.stability import format_stability
@@ -179,4 +180,7 @@ def report_sections(results: SuiteResults, front: list[str]) -> list[str]:
     ]
     if results.get("advisor"):
         lines += [format_advisor(results["advisor"]).rstrip("\n"), ""]
+    held_out = results.get("held_out")
+    if held_out:
+        lines += [format_held_out(held_out).rstrip("\n"), "", "![held-out PSNR](held_out.png)", ""]
     return lines + _section_stability(results)

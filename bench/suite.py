@@ -39,6 +39,7 @@ import numba
 import numpy as np
 
 from bench.advisor import validate_advisor
+from bench.held_out import run_held_out
 from bench.report import write_report
 from bench.stability import run_stability
 from bench.suite_fields import (
@@ -158,6 +159,10 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
                 )  # fmt: skip
     product = bench_product(config, chain_run, fields_dir)
     stability = run_stability(out / "stability", config.quick_methods)
+    held_out = []
+    if config.held_out_methods:
+        quick = config.name != "full"
+        held_out = run_held_out(fields_dir, quick=quick, methods=config.held_out_methods)
     at_end: MachineRecord = {
         **at_start,
         "load_average_end": list(os.getloadavg()),
@@ -181,6 +186,7 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
         "advisor": advisor,
         "product": product,
         "stability": stability,
+        "held_out": held_out,
         "wall_s": time.perf_counter() - started,
     }
 

@@ -13,6 +13,7 @@ from bench.suite_results import ConfigRecord, ModeRecord
 from core.errors import InputError
 from processing.interpolation import InterpolationMethod
 from processing.sampling import SamplerName
+from render.light_prediction import PREDICTORS
 from render.model_relight import ModelRelightSettings
 from render.relight_mode import MOST_ACCURATE_MODELS, RelightMode
 from render.relighter import RelightSettings
@@ -169,6 +170,8 @@ class SuiteConfig:
     advisor_fields, advisor_scenes, advisor_environments : where ``rig advise`` is validated
         (fields among the chain and density fields; HDR environments among ``environments``)
     advisor_samples : samples the advisor predicts on
+    held_out_methods : the methods of the held-out-light study (:mod:`bench.held_out`);
+        empty to skip it
     """
 
     name: str
@@ -189,6 +192,7 @@ class SuiteConfig:
     advisor_scenes: tuple[str, ...] = SCENES
     advisor_environments: tuple[str, ...] = ("courtyard", "sky")
     advisor_samples: int = 2000
+    held_out_methods: tuple[str, ...] = PREDICTORS
 
 
 def config_record(config: SuiteConfig) -> ConfigRecord:
@@ -221,6 +225,7 @@ def config_record(config: SuiteConfig) -> ConfigRecord:
         "advisor_scenes": config.advisor_scenes,
         "advisor_environments": config.advisor_environments,
         "advisor_samples": config.advisor_samples,
+        "held_out_methods": list(config.held_out_methods),
     }
 
 

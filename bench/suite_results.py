@@ -10,7 +10,10 @@ and format them as ``dict[str, Any]``.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, Literal, NotRequired, TypedDict, TypeGuard
+from typing import TYPE_CHECKING, Any, Literal, NotRequired, TypedDict, TypeGuard
+
+if TYPE_CHECKING:
+    from bench.held_out import HeldOutRecord
 
 __all__ = [
     "AdvisorRecord",
@@ -161,6 +164,7 @@ class ConfigRecord(TypedDict):
     advisor_scenes: Sequence[str]
     advisor_environments: Sequence[str]
     advisor_samples: int
+    held_out_methods: Sequence[str]
 
 
 class Machine(TypedDict):
@@ -259,4 +263,5 @@ class SuiteResults(TypedDict):
     advisor: list[AdvisorRecord]
     product: ProductRecord
     stability: StabilityRecord
+    held_out: NotRequired[list[HeldOutRecord]]
     wall_s: float

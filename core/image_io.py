@@ -1,9 +1,15 @@
-"""Image files: the one module that reads and writes EXR, Radiance HDR, PNG, JPEG and TIFF.
+"""Image files: the one module that reads and writes EXR, Radiance HDR, PNG, JPEG, TIFF and TGA.
 
 Readers return the stored values (:func:`read_pixels`: uint8, uint16 or float32, RGB channel
 order, alpha dropped, grey kept as (H, W)) or linear float32 (:func:`read_linear`: integers
 scaled to [0, 1] and decoded through a transfer curve). Every write is atomic
 (:func:`core.atomic.atomic_path`): a file named by the project is never seen half-written.
+
+Transfer curves. ``"srgb"`` and ``"linear"`` say how integers encode light; ``"auto"`` chooses
+by the pixel type (:func:`auto_transfer`): 8-bit values are sRGB, 16-bit and float values are
+linear (the convention of photographs developed from RAW and of RTI tools). The readers'
+default stays ``"srgb"`` for 8 and 16 bits alike: it is what :func:`write_linear` writes into a
+16-bit PNG (a display encoding), and panoramas are read that way.
 
 ================ ========================================= =====================================
 format           read                                      write
@@ -21,7 +27,18 @@ JPEG             OpenCV; a file without its end-of-image   8-bit sRGB (:func:`wr
 TIFF             tifffile; strips past the end of the      16-bit linear RGB
                  file are refused                          (:func:`write_linear16_tiff`), float
                                                            frames (:func:`encode_lossless`)
+TGA              Pillow: true colour, grey, colour-mapped, --
+                 RLE, either origin; a truncated file is
+                 refused, so is an RLE packet across
+                 rows (TGA 1.0 allowed it, Pillow does
+                 not read it)
+BMP, WebP, JPEG  OpenCV, when built with the codec         --
+2000, PNM, PFM,  (:data:`OPENCV_SUFFIXES` holds those
+Sun raster, AVIF this OpenCV has)
 ================ ========================================= =====================================
+
+OpenCV's own log lines about a broken file (``[ERROR:0@...]``) are caught and put into the
+one-line error rather than printed before it.
 """
 
 from __future__ import annotations
@@ -41,6 +58,7 @@ import numpy as np
 import OpenEXR
 import tifffile
 from numpy.typing import NDArray
+from PIL import Image, UnidentifiedImageError
 
 from core.atomic import atomic_path
 from core.colour import linear_to_srgb, srgb_to_linear
@@ -50,12 +68,17 @@ __all__ = [
     "EXR_SUFFIXES",
     "OPENCV_SUFFIXES",
     "READABLE_SUFFIXES",
+    "TGA_SUFFIXES",
     "TIFF_SUFFIXES",
     "ImageFileError",
+    "PixelDepth",
     "Transfer",
+    "TransferChoice",
+    "auto_transfer",
     "check_tiff_strips",
     "encode_lossless",
     "linear_from_pixels",
+    "pixel_depth",
     "read_linear",
     "read_pixels",
     "write_exr",
@@ -66,12 +89,27 @@ __all__ = [
 
 EXR_SUFFIXES = frozenset({".exr"})
 TIFF_SUFFIXES = frozenset({".tif", ".tiff"})
-#: Read through OpenCV (Radiance HDR included).
-OPENCV_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".hdr", ".pic"})
-READABLE_SUFFIXES = EXR_SUFFIXES | TIFF_SUFFIXES | OPENCV_SUFFIXES
+#: Read through Pillow: OpenCV has no TGA codec.
+TGA_SUFFIXES = frozenset({".tga"})
+_JPEG_SUFFIXES = frozenset({".jpg", ".jpeg", ".jpe"})
+#: Codecs an OpenCV build may leave out (GIF is not offered: animated, palette-only).
+_OPENCV_OPTIONAL = (
+    ".bmp", ".dib", ".webp", ".jp2", ".pbm", ".pgm", ".ppm", ".pnm", ".pfm", ".sr", ".ras",
+    ".avif",
+)  # fmt: skip
+#: Read through OpenCV (Radiance HDR included), with the optional codecs this build has:
+#: OpenCV registers each codec's reader and writer together, so the writer stands for both.
+OPENCV_SUFFIXES = frozenset({".png", ".hdr", ".pic"} | _JPEG_SUFFIXES) | frozenset(
+    suffix for suffix in _OPENCV_OPTIONAL if cv2.haveImageWriter(f"probe{suffix}")
+)
+READABLE_SUFFIXES = EXR_SUFFIXES | TIFF_SUFFIXES | TGA_SUFFIXES | OPENCV_SUFFIXES
 
 #: How 8/16-bit values encode light: the sRGB curve, or proportional to it.
 Transfer = Literal["srgb", "linear"]
+#: A transfer as asked for: a curve, or ``"auto"`` to choose it by the pixel type.
+TransferChoice = Literal["auto", "srgb", "linear"]
+#: The kinds of stored values: 8-bit and 16-bit integers, or floats (any width).
+PixelDepth = Literal["8-bit", "16-bit", "float"]
 
 _TIFF_MAGIC = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
 
@@ -85,12 +123,13 @@ def read_pixels(path: str | os.PathLike[str]) -> NDArray[Any]:
 
     Parameters
     ----------
-    path : an ``.exr``, ``.hdr``, ``.pic``, ``.png``, ``.jpg``, ``.jpeg``, ``.tif`` or ``.tiff``
+    path : an image file with one of :data:`READABLE_SUFFIXES` (``.exr``, ``.hdr``, ``.png``,
+        ``.jpg``, ``.tif``, ``.tga``, ``.bmp``...; any case)
 
     Returns
     -------
-    ndarray, shape (H, W) for grey or (H, W, 3) for colour (alpha dropped); uint8, uint16 or
-    float (EXR and HDR: float32 linear; TIFF: as stored)
+    ndarray, shape (H, W) for grey or (H, W, 3) for colour (alpha dropped, a colour map
+    applied); uint8, uint16 or float (EXR, HDR and PFM: float32 linear; TIFF: as stored)
 
     Raises
     ------
@@ -113,24 +152,62 @@ def read_pixels(path: str | os.PathLike[str]) -> NDArray[Any]:
         return _read_exr(file)
     if suffix in TIFF_SUFFIXES:
         return _read_tiff(file)
+    if suffix in TGA_SUFFIXES:
+        return _read_tga(file)
     return _read_with_opencv(file)
 
 
+def pixel_depth(pixels: NDArray[Any], *, where: str = "image") -> PixelDepth:
+    """What stored values are: ``"8-bit"`` (uint8), ``"16-bit"`` (uint16) or ``"float"``.
+
+    Raises
+    ------
+    ImageFileError
+        Another pixel type; the message names ``where``.
+    """
+    if pixels.dtype == np.uint8:
+        return "8-bit"
+    if pixels.dtype == np.uint16:
+        return "16-bit"
+    if pixels.dtype in (np.float16, np.float32, np.float64):
+        return "float"
+    raise ImageFileError(f"{where}: unsupported pixel type {pixels.dtype}")
+
+
+def auto_transfer(pixels: NDArray[Any], *, where: str = "image") -> Transfer:
+    """The curve ``"auto"`` takes for stored values: 8-bit sRGB, 16-bit and float linear.
+
+    Why: 8-bit files are display pictures (JPEG, most PNG, TGA, BMP), sRGB-encoded whatever
+    their tags say; 16-bit PNG/TIFF photographs are developed from RAW without a curve so as
+    to keep the sensor's proportionality (processing's decoder assumes the same); floats are
+    always linear. A 16-bit file written for display (:func:`write_linear` writes sRGB) needs
+    ``"srgb"`` said explicitly.
+    """
+    return "srgb" if pixel_depth(pixels, where=where) == "8-bit" else "linear"
+
+
 def linear_from_pixels(
-    pixels: NDArray[Any], *, transfer: Transfer = "srgb", where: str = "image"
+    pixels: NDArray[Any], *, transfer: TransferChoice = "srgb", where: str = "image"
 ) -> NDArray[np.float32]:
     """Stored values as linear float32: integers over their full scale, through ``transfer``.
 
     Parameters
     ----------
     pixels : ndarray of uint8, uint16 or float; any shape
-    transfer : {"srgb", "linear"}, the curve of integer values (floats are linear as stored)
-    where : str, named in the error for another pixel type
+    transfer : {"srgb", "linear", "auto"}
+        The curve of integer values; ``"auto"`` takes :func:`auto_transfer`'s (8-bit sRGB,
+        16-bit linear). Floats are linear as stored whatever is asked. The default decodes
+        16-bit values as sRGB too (see the module docstring).
+    where : str, named in the error for another pixel type or transfer
 
     Returns
     -------
     ndarray, same shape, float32 (1.0 = the integer format's full scale)
     """
+    if transfer not in ("auto", "srgb", "linear"):
+        raise InputError(f"{where}: transfer must be 'auto', 'srgb' or 'linear', not {transfer!r}")
+    if transfer == "auto":
+        transfer = auto_transfer(pixels, where=where)
     if pixels.dtype == np.uint8:
         values = pixels.astype(np.float32) / np.float32(255.0)
     elif pixels.dtype == np.uint16:
@@ -143,11 +220,12 @@ def linear_from_pixels(
 
 
 def read_linear(
-    path: str | os.PathLike[str], *, transfer: Transfer = "srgb"
+    path: str | os.PathLike[str], *, transfer: TransferChoice = "srgb"
 ) -> NDArray[np.float32]:
     """An image file as linear float32 (see :func:`read_pixels` and :func:`linear_from_pixels`).
 
-    ``transfer`` applies to 8- and 16-bit files; EXR, HDR and float TIFF are linear.
+    ``transfer`` applies to 8- and 16-bit files (``"auto"``: 8-bit sRGB, 16-bit linear); EXR,
+    HDR, PFM and float TIFF are linear.
     """
     return linear_from_pixels(read_pixels(path), transfer=transfer, where=str(path))
 
@@ -259,21 +337,65 @@ def _read_tiff(file: Path) -> NDArray[Any]:
     return pixels[:, :, :3] if pixels.ndim == 3 and pixels.shape[2] == 4 else pixels
 
 
+def _read_tga(file: Path) -> NDArray[np.uint8]:
+    try:
+        # formats=["TGA"]: a PNG renamed .tga is refused, as OpenCV refuses one renamed .jpg.
+        with Image.open(file, formats=["TGA"]) as opened:
+            opened.load()  # decodes now: a truncated file raises here, not later
+            picture: Image.Image = opened
+            if picture.mode in ("P", "PA"):
+                picture = picture.convert("RGB")  # the colour map applied, alpha dropped
+            mode = picture.mode
+            pixels = np.asarray(picture)
+    except (OSError, UnidentifiedImageError, SyntaxError, ValueError) as error:
+        # Pillow raises OSError for truncated data, UnidentifiedImageError for a bad header.
+        hint = ""
+        if "overrun" in str(error):
+            hint = (
+                "; if it is run-length encoded, an RLE packet runs across rows (TGA 1.0 "
+                "allowed it, 2.0 does not): save it again uncompressed or per row"
+            )
+        raise ImageFileError(
+            f"{file}: cannot decode as TGA (truncated or corrupt?): {error}{hint}"
+        ) from error
+    if pixels.dtype != np.uint8 or mode not in ("L", "LA", "RGB", "RGBA"):
+        raise ImageFileError(f"{file}: unsupported TGA pixel layout {mode!r} ({pixels.dtype})")
+    if mode == "LA":
+        return np.ascontiguousarray(pixels[:, :, 0])
+    return np.ascontiguousarray(pixels[:, :, :3]) if mode == "RGBA" else pixels
+
+
 def _read_with_opencv(file: Path) -> NDArray[Any]:
     data = file.read_bytes()
     suffix = file.suffix.lower()
     # OpenCV decodes a truncated JPEG without complaint; the end-of-image marker tells.
-    if suffix in (".jpg", ".jpeg") and data.rfind(b"\xff\xd9", max(0, len(data) - 4096)) < 0:
+    if suffix in _JPEG_SUFFIXES and data.rfind(b"\xff\xd9", max(0, len(data) - 4096)) < 0:
         raise ImageFileError(f"{file}: JPEG has no end-of-image marker (file truncated?)")
-    image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    with _library_output() as printed:
+        image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
     if image is None:
+        said = _opencv_said(printed)
         raise ImageFileError(
             f"{file}: cannot decode as {suffix[1:].upper()} (truncated or corrupt?)"
+            + (f" ({said})" if said else "")
         )
+    for line in printed:
+        print(line, file=sys.stderr)
     if image.ndim == 3 and image.shape[2] in (3, 4):
         code = cv2.COLOR_BGRA2RGB if image.shape[2] == 4 else cv2.COLOR_BGR2RGB
         image = cv2.cvtColor(image, code)
     return np.asarray(image)
+
+
+def _opencv_said(lines: list[str]) -> str:
+    """The gist of OpenCV's log lines: the text after its ``error:`` markers, at most two."""
+    said = []
+    for line in lines:
+        text = line.strip()
+        if not text:
+            continue
+        said.append(text.rsplit("error:", 1)[-1].strip() if "error:" in text else text)
+    return "; ".join(said[:2])
 
 
 def _check_picture(path: Path, picture: NDArray[Any], dtype: type[np.generic]) -> None:

@@ -43,6 +43,7 @@ from tqdm import tqdm
 from core.camera_model import rig_to_camera
 from core.errors import InputError, RigError
 from core.field_store import ReflectanceField
+from core.image_io import TransferChoice
 from core.point_spacing import point_spacing
 from processing.image_quality import ImageQuality, display_scale, image_quality
 from processing.rti import import_rti
@@ -112,10 +113,15 @@ def split_lights(field: ReflectanceField, how: str) -> tuple[NDArray[np.int64], 
     return fit, test
 
 
-def test_field_from_lp(lp_path: str | Path) -> ReflectanceField:
-    """The test images of an ``.lp`` file (and its images) as a field held in memory."""
+def test_field_from_lp(
+    lp_path: str | Path, *, transfer: TransferChoice = "auto"
+) -> ReflectanceField:
+    """The test images of an ``.lp`` file (and its images) as a field held in memory.
+
+    ``transfer`` decodes them as :func:`processing.rti.import_rti` does the field's.
+    """
     with tempfile.TemporaryDirectory(prefix="rig-evaluate-") as scratch:
-        store = import_rti(lp_path, Path(scratch) / "test.zarr", progress=False)
+        store = import_rti(lp_path, Path(scratch) / "test.zarr", progress=False, transfer=transfer)
         return store.subset()  # in memory: the temporary store goes
 
 

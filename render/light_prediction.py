@@ -24,6 +24,11 @@ method                      what predicts the unmeasured light
                             generalises (the shape of a lobe between lights), the residual
                             carries the rest (measured on the bundled RTI capture, the
                             barycentric residual beat the ``rbf`` one by 1.6 dB)
+``adaptive``                per sample, ``barycentric`` and ``lambert+ggx+residual`` mixed
+                            by their leave-one-light-out errors (each weighted by the other's
+                            share of the error): where the model explains a sample its
+                            residual helps, where it does not (cast shadows, grazing light)
+                            plain interpolation is kept
 ==========================  ===============================================================
 
 Fitted predictions are bounded by what the data allow: at least 0 and at most
@@ -71,6 +76,7 @@ __all__ = [
     "LightPredictor",
     "PredictorName",
     "choose_rbf_sigma",
+    "leave_one_out_barycentric",
     "make_predictor",
     "rbf_weights",
 ]
@@ -89,6 +95,7 @@ PredictorName = Literal[
     "lambert+ggx",
     "lambert+residual",
     "lambert+ggx+residual",
+    "adaptive",
 ]
 #: Every method, the baselines first.
 PREDICTORS: tuple[PredictorName, ...] = get_args(PredictorName)
@@ -298,6 +305,59 @@ class _Residual:
         return _bounded(self.field, camera, self.base.predict(camera, directions) + correction)
 
 
+def leave_one_out_barycentric(
+    directions: NDArray[np.floating], values: NDArray[np.floating]
+) -> NDArray[np.float64]:
+    """Each measured light's values predicted barycentrically from the others: (T, ...).
+
+    The honest leave-one-light-out prediction: the triangulation is rebuilt without the
+    light (T triangulations of T - 1 directions).
+    """
+    d = np.asarray(directions, dtype=np.float64)
+    v = np.asarray(values)
+    out = np.zeros(v.shape, dtype=np.float64)
+    for j in range(len(d)):
+        keep = np.r_[0:j, j + 1 : len(d)]
+        weights = interpolation_weights(d[keep], d[j : j + 1], "barycentric", policy="clamp")
+        out[j] = weights.apply(v[keep])[0]
+    return out
+
+
+@dataclass
+class _Adaptive:
+    """Barycentric and model + residual, mixed per sample by their leave-one-light-out errors."""
+
+    field: ReflectanceField
+    name: str
+    residual: _Residual
+    _share: dict[int, NDArray[np.float64]] = default(default_factory=dict)
+
+    def share(self, camera: int) -> NDArray[np.float64]:
+        """Weight (P,) of model + residual per sample: the barycentric share of the error."""
+        if camera not in self._share:
+            measured = self.field.light_directions
+            data = self.field.camera_slab(camera)
+            residual = self.residual._residual_of(camera)
+            fitted = data - residual
+            alone = leave_one_out_barycentric(measured, data)
+            helped = fitted + leave_one_out_barycentric(measured, residual)
+            error_alone = np.sum((alone - data) ** 2, axis=(0, 2))
+            error_helped = np.sum((helped - data) ** 2, axis=(0, 2))
+            total = error_alone + error_helped
+            self._share[camera] = np.divide(
+                error_alone, total, out=np.full_like(total, 0.5), where=total > 0
+            )
+        return self._share[camera]
+
+    def predict(self, camera: int, directions: NDArray[np.floating]) -> NDArray[np.float32]:
+        measured = self.field.light_directions
+        weights = interpolation_weights(measured, directions, "barycentric", policy="clamp")
+        alone = weights.apply(self.field.camera_slab(camera))
+        helped = self.residual.predict(camera, directions)
+        share = self.share(camera)[None, :, None]
+        return _bounded(self.field, camera, share * helped + (1.0 - share) * alone)
+
+
 def _fitted_models(
     field: ReflectanceField, names: list[str], models: SampleModels | None, progress: bool
 ) -> SampleModels:
@@ -348,7 +408,9 @@ def make_predictor(
     basis = name.removesuffix("-8bit")
     if basis in BASIS_MODELS:
         return _Basis(field, name, basis, name.endswith("-8bit"), scale)
-    model = name.removesuffix("+residual")
+    model = "lambert+ggx" if name == "adaptive" else name.removesuffix("+residual")
     fitted = _fitted_models(field, [model], models, progress)
     base = _Model(field, model, fitted)
+    if name == "adaptive":
+        return _Adaptive(field, name, _Residual(field, "lambert+ggx+residual", base))
     return _Residual(field, name, base) if name.endswith("+residual") else base

@@ -38,6 +38,7 @@ TINY = SuiteConfig(
     capture=None,
     loop=False,
     sky_height=64,
+    held_out_methods=("nearest", "rbf", "adaptive"),
 )
 
 
@@ -74,6 +75,11 @@ def test_report_from_results(results: SuiteResults, tmp_path: Path) -> None:
     for heading in ("## The ablation chain", "## Error against K", "## LDR against HDR"):
         assert heading in text
     assert "| paper |" in text
+    # The held-out study: the real capture, then the simulator labelled as its own family.
+    assert "## Held-out lights" in text and (tmp_path / "held_out.png").stat().st_size > 0
+    assert "### RTI lion (bundled): real, split every-other" in text
+    assert "### glossy sphere (simulator): own family" in text
+    assert [r["family"] for r in loaded["held_out"]] == ["real", "own family"]
     assert "Pareto front" in text
     assert text.rstrip().endswith("A section from another module.")
 

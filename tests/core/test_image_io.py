@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import struct
 from collections.abc import Callable
 from pathlib import Path
 
@@ -15,15 +16,19 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from numpy.typing import NDArray
+from PIL import Image
 
 from core.colour import linear_to_srgb, srgb_to_linear
 from core.errors import InputError, RigError
 from core.image_io import (
+    OPENCV_SUFFIXES,
     READABLE_SUFFIXES,
     ImageFileError,
+    auto_transfer,
     check_tiff_strips,
     encode_lossless,
     linear_from_pixels,
+    pixel_depth,
     read_linear,
     read_pixels,
     write_exr,
@@ -452,8 +457,179 @@ def test_a_missing_file_is_refused_by_name(tmp_path: Path) -> None:
 
 
 def test_an_unknown_suffix_is_refused_by_name(tmp_path: Path) -> None:
-    target = tmp_path / "photo.bmp"
-    assert cv2.imwrite(str(target), np.zeros((2, 2, 3), np.uint8))  # exists and is valid
-    with pytest.raises(ImageFileError, match=_names(target) + r": unknown image format '\.bmp'"):
+    target = tmp_path / "photo.gif"  # OpenCV may read GIF; it is not offered (animated, palette)
+    target.write_bytes(b"GIF89a" + bytes(32))
+    with pytest.raises(ImageFileError, match=_names(target) + r": unknown image format '\.gif'"):
         read_pixels(target)
     assert issubclass(ImageFileError, InputError)
+
+
+# -- transfer "auto" ----------------------------------------------------------------------------
+
+
+def test_auto_transfer_is_srgb_for_8_bit_and_linear_for_16_bit_and_float() -> None:
+    assert auto_transfer(np.zeros(2, np.uint8)) == "srgb"
+    assert auto_transfer(np.zeros(2, np.uint16)) == "linear"
+    assert auto_transfer(np.zeros(2, np.float16)) == "linear"
+    assert [pixel_depth(np.zeros(1, t)) for t in (np.uint8, np.uint16, np.float32)] == [
+        "8-bit",
+        "16-bit",
+        "float",
+    ]
+    with pytest.raises(ImageFileError, match=r"a\.png: unsupported pixel type int32"):
+        pixel_depth(np.zeros(1, np.int32), where="a.png")
+    np.testing.assert_allclose(
+        linear_from_pixels(np.array([13107], np.uint16), transfer="auto"), [0.2], rtol=1e-7
+    )
+    np.testing.assert_allclose(
+        linear_from_pixels(np.array([10], np.uint8), transfer="auto"), [10 / 255 / 12.92]
+    )
+    with pytest.raises(InputError, match=r"f\.png: transfer must be 'auto', 'srgb' or 'linear'"):
+        linear_from_pixels(np.zeros(1, np.uint8), transfer="gamma", where="f.png")  # type: ignore[arg-type]
+
+
+def test_a_16_bit_png_reads_linear_with_auto_and_srgb_by_default(tmp_path: Path) -> None:
+    # 13107 / 65535 = 0.2 exactly: a 16-bit linear 0.2 stays 0.2; decoded as sRGB it is 0.0331.
+    assert cv2.imwrite(str(tmp_path / "a.png"), np.full((2, 3, 3), 13107, np.uint16))
+    auto = read_linear(tmp_path / "a.png", transfer="auto")
+    np.testing.assert_allclose(auto, 0.2, rtol=0, atol=1 / 65535)
+    np.testing.assert_allclose(read_linear(tmp_path / "a.png"), 0.0331048, rtol=1e-5)
+    assert cv2.imwrite(str(tmp_path / "b.png"), np.full((2, 3, 3), 128, np.uint8))
+    np.testing.assert_allclose(
+        read_linear(tmp_path / "b.png", transfer="auto"), 0.2158605, rtol=1e-6
+    )
+
+
+# -- TGA ----------------------------------------------------------------------------------------
+
+
+def _tga(pixels: NDArray[np.uint8], *, top_down: bool = False, rle: bool = False) -> bytes:
+    """A TGA file written by hand from the specification (no footer).
+
+    ``pixels``: (H, W) grey, (H, W, 3) RGB or (H, W, 4) RGBA. RLE files mix run packets (for
+    repeated pixels) and one-pixel raw packets, none across rows.
+    """
+    height, width = pixels.shape[:2]
+    channels = 1 if pixels.ndim == 2 else pixels.shape[2]
+    kind = (3 if channels == 1 else 2) + (8 if rle else 0)
+    descriptor = (0x20 if top_down else 0) | (8 if channels == 4 else 0)
+    header = struct.pack(
+        "<BBBHHBHHHHBB", 0, 0, kind, 0, 0, 0, 0, 0, width, height, 8 * channels, descriptor
+    )
+    rows = pixels if top_down else pixels[::-1]
+    flat = rows.reshape(height * width, channels)
+    if channels >= 3:
+        flat = flat[:, [2, 1, 0, 3][:channels]]  # stored B, G, R(, A)
+    if not rle:
+        return header + flat.tobytes()
+    body = bytearray()
+    for row in flat.reshape(height, width, channels):  # TGA 2.0: no packet spans two rows
+        index = 0
+        while index < width:
+            run = 1
+            while index + run < width and run < 128 and (row[index + run] == row[index]).all():
+                run += 1
+            body += bytes([0x80 | (run - 1) if run > 1 else 0]) + row[index].tobytes()
+            index += run
+    return header + bytes(body)
+
+
+def _blocks(channels: int) -> NDArray[np.uint8]:
+    """A 6 x 9 picture of flat blocks (runs for RLE) and some noise (raw packets)."""
+    shape = (6, 9) if channels == 1 else (6, 9, channels)
+    picture = np.zeros(shape, np.uint8)
+    picture[:3] = 200
+    picture[3:, :4] = 17
+    picture[3:, 4:] = _rng().integers(0, 256, picture[3:, 4:].shape, dtype=np.uint8)
+    return picture
+
+
+@pytest.mark.parametrize("rle", [False, True])
+@pytest.mark.parametrize("top_down", [False, True])
+@pytest.mark.parametrize("channels", [1, 3, 4])
+def test_tga_reads_every_layout(tmp_path: Path, rle: bool, top_down: bool, channels: int) -> None:
+    picture = _blocks(channels)
+    target = tmp_path / "a.TGA"
+    target.write_bytes(_tga(picture, top_down=top_down, rle=rle))
+    back = read_pixels(target)
+    assert back.dtype == np.uint8
+    np.testing.assert_array_equal(back, picture if channels != 4 else picture[:, :, :3])
+    assert read_linear(target, transfer="auto").dtype == np.float32
+
+
+def test_tga_written_by_pillow_reads_back(tmp_path: Path) -> None:
+    picture = _blocks(3)
+    Image.fromarray(picture).save(tmp_path / "rle.tga", compression="tga_rle")
+    np.testing.assert_array_equal(read_pixels(tmp_path / "rle.tga"), picture)
+    mapped = Image.fromarray(picture).quantize(16)  # a colour-mapped TGA
+    mapped.save(tmp_path / "mapped.tga")
+    np.testing.assert_array_equal(
+        read_pixels(tmp_path / "mapped.tga"), np.asarray(mapped.convert("RGB"))
+    )
+
+
+def test_broken_tga_files_are_refused_by_name(tmp_path: Path) -> None:
+    empty = tmp_path / "empty.tga"
+    empty.write_bytes(b"")
+    with pytest.raises(ImageFileError, match=_names(empty) + r": the file is empty"):
+        read_pixels(empty)
+    for rle in (False, True):
+        whole = _tga(_blocks(3), rle=rle)
+        cut = tmp_path / f"cut{rle}.tga"
+        cut.write_bytes(whole[: len(whole) - 20])
+        with pytest.raises(ImageFileError, match=_names(cut) + r": cannot decode as TGA .*trunc"):
+            read_pixels(cut)
+    across = tmp_path / "across.tga"  # one RLE packet over every row (TGA 1.0 allowed it)
+    across.write_bytes(_tga(np.zeros((6, 9, 3), np.uint8), rle=True)[:18] + b"\xb5\x01\x02\x03")
+    with pytest.raises(ImageFileError, match=_names(across) + ": .*runs across rows"):
+        read_pixels(across)
+    header_only = tmp_path / "header.tga"
+    header_only.write_bytes(_tga(_blocks(3))[:10])
+    with pytest.raises(ImageFileError, match=_names(header_only) + ": cannot decode as TGA"):
+        read_pixels(header_only)
+    renamed = tmp_path / "renamed.tga"
+    write_srgb8(tmp_path / "a.png", _gradient())
+    renamed.write_bytes((tmp_path / "a.png").read_bytes())
+    with pytest.raises(ImageFileError, match=_names(renamed) + ": cannot decode as TGA"):
+        read_pixels(renamed)
+    (tmp_path / "folder.tga").mkdir()
+    with pytest.raises(ImageFileError, match=r"folder\.tga: is a directory"):
+        read_pixels(tmp_path / "folder.tga")
+
+
+# -- BMP and the other OpenCV formats -------------------------------------------------------------
+
+
+def test_bmp_reads_colour_and_grey(tmp_path: Path) -> None:
+    assert {".tga", ".bmp"} <= READABLE_SUFFIXES and ".bmp" in OPENCV_SUFFIXES
+    colour = _blocks(3)
+    assert cv2.imwrite(str(tmp_path / "c.bmp"), colour[:, :, ::-1])  # OpenCV writes BGR
+    np.testing.assert_array_equal(read_pixels(tmp_path / "c.bmp"), colour)
+    grey = _blocks(1)
+    assert cv2.imwrite(str(tmp_path / "g.BMP"), grey)
+    back = read_pixels(tmp_path / "g.BMP")
+    assert back.dtype == np.uint8
+    np.testing.assert_array_equal(back if back.ndim == 2 else back[:, :, 0], grey)
+    np.testing.assert_allclose(
+        read_linear(tmp_path / "c.bmp", transfer="auto"),
+        srgb_to_linear(colour.astype(np.float32) / 255.0),
+    )
+
+
+def test_broken_bmp_files_are_refused_in_one_line(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    assert cv2.imwrite(str(tmp_path / "whole.bmp"), _blocks(3))
+    data = (tmp_path / "whole.bmp").read_bytes()
+    capfd.readouterr()
+    for length in (0, 30, len(data) // 2):
+        cut = tmp_path / f"cut{length}.bmp"
+        cut.write_bytes(data[:length])
+        with pytest.raises(ImageFileError, match=_names(cut)):
+            read_pixels(cut)
+    # OpenCV logs its own "[ERROR:0@...]" lines; they go into the message, not before it.
+    said = capfd.readouterr()
+    assert said.err == "" and said.out == ""
+    (tmp_path / "folder.bmp").mkdir()
+    with pytest.raises(ImageFileError, match=r"folder\.bmp: is a directory"):
+        read_pixels(tmp_path / "folder.bmp")

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
 import cv2
@@ -8,16 +9,20 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
+from PIL import Image
 
 from core.camera_model import PinholeCamera, camera_to_rig, rig_to_camera
+from core.colour import srgb_to_linear
 from core.errors import DatasetError, InputError
 from core.field_store import ReflectanceField
-from core.image_io import read_linear
+from core.image_io import read_linear, write_exr, write_linear16_tiff
 from core.sample_data import rti_capture_path
 from processing.rti import (
     LightPositions,
     export_lp,
     import_rti,
+    open_field_or_rti,
+    read_intensity_sidecar,
     read_lp,
     rti_camera,
     write_lp,
@@ -119,28 +124,53 @@ def test_missing_or_binary_lp_files_are_refused(tmp_path: Path) -> None:
         read_lp(tmp_path / "binary.lp")
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+# A name whose last space-separated part is a number would read as a five-column line.
 _NAMES = st.text(
     alphabet=st.characters(exclude_categories=("Cs",), exclude_characters="\r\n"),
     min_size=1,
     max_size=12,
-).filter(lambda name: name == name.strip())
+).filter(
+    lambda name: (
+        name == name.strip() and not (len(name.split()) > 1 and _is_number(name.split()[-1]))
+    )
+)
 _VECTORS = arrays(
     np.float64, 3, elements=st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
 ).filter(lambda v: float(np.linalg.norm(v)) > 1e-6)
 
 
 @settings(max_examples=60, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(entries=st.lists(st.tuples(_NAMES, _VECTORS), min_size=1, max_size=8))
-def test_write_then_read_round_trips(tmp_path: Path, entries: list[tuple[str, np.ndarray]]) -> None:
+@given(
+    entries=st.lists(st.tuples(_NAMES, _VECTORS), min_size=1, max_size=8),
+    scale=st.one_of(st.none(), st.floats(1e-6, 1e6)),
+)
+def test_write_then_read_round_trips(
+    tmp_path: Path, entries: list[tuple[str, np.ndarray]], scale: float | None
+) -> None:
     names = [name for name, _ in entries]
     vectors = np.array([vector for _, vector in entries])
-    written = write_lp(tmp_path / "sub" / "round.lp", names, vectors)
+    intensities = None if scale is None else scale * np.arange(1, len(names) + 1)
+    written = write_lp(tmp_path / "sub" / "round.lp", names, vectors, intensities)
     read = read_lp(tmp_path / "sub" / "round.lp")
     assert read.files == names == written.files
     assert read.lines == written.lines
     unit = vectors / np.linalg.norm(vectors, axis=1, keepdims=True)
     np.testing.assert_allclose(read.directions, unit, rtol=0, atol=1e-15)
     np.testing.assert_allclose(written.directions, unit, rtol=0, atol=1e-15)
+    if intensities is None:
+        assert read.intensities is None and written.intensities is None
+    else:
+        assert read.intensities is not None and written.intensities is not None
+        np.testing.assert_array_equal(read.intensities, intensities)  # every digit
+        np.testing.assert_array_equal(written.intensities, intensities)
 
 
 def test_write_lp_format_and_digits(tmp_path: Path) -> None:
@@ -167,6 +197,7 @@ def test_write_lp_format_and_digits(tmp_path: Path) -> None:
         (["a.jpg", ""], [[0, 0, 1], [0, 0, 1]], r"line 3: image name '' is empty"),
         ([" a.jpg"], [[0, 0, 1]], r"line 2: .*edge whitespace"),
         (["a\nb.jpg"], [[0, 0, 1]], r"line 2: .*line break"),
+        (["a.jpg", "scan 2"], [[0, 0, 1]] * 2, r"line 3: image name 'scan 2' ends in a .*number"),
     ],
 )
 def test_write_lp_refuses_bad_arguments(
@@ -177,9 +208,63 @@ def test_write_lp_refuses_bad_arguments(
     assert not (tmp_path / "bad.lp").exists()
 
 
+@pytest.mark.parametrize(
+    ("intensities", "match"),
+    [
+        ([1.0], r"shape \(2,\)"),
+        ([1.0, 0.0], r"line 3: intensity 0\.0 is not a positive finite number"),
+        ([-1.0, 1.0], r"line 2: intensity -1\.0"),
+        ([1.0, np.inf], r"line 3: intensity inf"),
+        ([np.nan, 1.0], r"line 2: intensity nan"),
+    ],
+)
+def test_write_lp_refuses_bad_intensities(
+    tmp_path: Path, intensities: list[float], match: str
+) -> None:
+    with pytest.raises(InputError, match=match):
+        write_lp(tmp_path / "bad.lp", ["a.jpg", "b.jpg"], [[0, 0, 1]] * 2, intensities)
+    assert not (tmp_path / "bad.lp").exists()
+
+
 def test_light_positions_check_their_shapes() -> None:
     with pytest.raises(InputError, match=r"shape \(2, 3\)"):
         LightPositions(files=["a", "b"], directions=np.zeros((3, 3)))
+    with pytest.raises(InputError, match=r"intensities must have shape \(2,\)"):
+        LightPositions(files=["a", "b"], directions=np.eye(3)[:2], intensities=np.ones(3))
+    with pytest.raises(InputError, match=r"light 1 \('b'\): intensity 0\.0"):
+        LightPositions(files=["a", "b"], directions=np.eye(3)[:2], intensities=np.array([1, 0.0]))
+
+
+def test_a_fifth_column_gives_the_intensities(tmp_path: Path) -> None:
+    lp = tmp_path / "five.lp"
+    lp.write_text("2\r\nmy photo.jpg 0 0 2 0.5\r\n\tb.jpg\t3 0 4\t2e0  \r\n", encoding="utf-8")
+    lights = read_lp(lp)
+    assert lights.files == ["my photo.jpg", "b.jpg"]
+    assert lights.intensities is not None
+    np.testing.assert_array_equal(lights.intensities, [0.5, 2.0])
+    np.testing.assert_allclose(lights.directions, [[0, 0, 1], [0.6, 0, 0.8]], atol=1e-15)
+    assert read_lp(LOEWENKOPF_LP).intensities is None  # the four-column file
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("3\na.jpg 0 0 1 2\nb.jpg 0 0 1\nc.jpg 0 0 1 2\n", r"line 3: 4 columns, but line 2 has 5"),
+        ("2\na.jpg 0 0 1\nb.jpg 0 0 1 2\n", r"line 3: 5 columns, but line 2 has 4"),
+        ("2\na.jpg 0 0 1\nscan 2 0 0 1\n", r"line 3: 5 columns.*name ending in a separate number"),
+        ("1\na.jpg 0 0 1 0\n", r"line 2: intensity '0' must be a positive finite number"),
+        ("1\na.jpg 0 0 1 -2\n", r"line 2: intensity '-2' must be a positive"),
+        ("1\na.jpg 0 0 1 nan\n", r"line 2: intensity 'nan' must be a positive"),
+        ("1\na.jpg 0 0 1 inf\n", r"line 2: intensity 'inf' must be a positive"),
+        ("1\na.jpg 0 0 x 2\n", r"line 2: 'x' is not a number"),
+    ],
+)
+def test_bad_fifth_columns_are_refused_with_the_line(tmp_path: Path, text: str, match: str) -> None:
+    lp = tmp_path / "bad.lp"
+    lp.write_text(text, encoding="utf-8")
+    with pytest.raises(DatasetError, match=match) as caught:
+        read_lp(lp)
+    assert str(lp) in str(caught.value)
 
 
 # --- frames --------------------------------------------------------------------------------
@@ -215,7 +300,10 @@ def test_camera_and_rig_frames_are_inverse_rotations(
 ) -> None:
     rig = camera_to_rig(vectors, camera)
     np.testing.assert_allclose(rig_to_camera(rig, camera), vectors, atol=1e-12)
-    np.testing.assert_allclose(np.linalg.norm(rig, axis=1), np.linalg.norm(vectors, axis=1))
+    # Lengths kept (absolutely: squares of values near 1e-162 underflow to subnormals).
+    np.testing.assert_allclose(
+        np.linalg.norm(rig, axis=1), np.linalg.norm(vectors, axis=1), rtol=1e-7, atol=1e-12
+    )
     np.testing.assert_allclose(camera_to_rig([0, 0, 1], camera), camera.direction, atol=1e-12)
     assert camera_to_rig(vectors[0], camera).shape == (3,)
 
@@ -368,3 +456,320 @@ def test_import_refuses_bad_arguments(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="exists and is not a field store"):
         import_rti(lp, tmp_path / "taken", progress=False)
     assert (tmp_path / "taken" / "notes.txt").read_text(encoding="utf-8") == "mine"
+
+
+# --- transfer, masks, intensities, formats ---------------------------------------------------
+
+
+def _capture(
+    folder: Path,
+    images: list[np.ndarray],
+    *,
+    suffix: str = ".png",
+    extra: list[str] | None = None,
+    name: str = "cap",
+) -> Path:
+    """``images`` (RGB order; uint8, uint16 or float32) written under folder/img/ by OpenCV (EXR
+    by core.image_io), and ``name``.lp listing them, with ``extra`` appended to each line."""
+    lines = [str(len(images))]
+    for index, image in enumerate(images):
+        path = folder / "img" / f"{index}{suffix}"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if suffix == ".exr":
+            write_exr(path, image)
+        else:
+            assert cv2.imwrite(str(path), image[:, :, ::-1] if image.ndim == 3 else image)
+        tail = f" {extra[index]}" if extra else ""
+        lines.append(f"img/{index}{suffix} {0.1 * index} 0.2 1.0{tail}")
+    lp = folder / f"{name}.lp"
+    lp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return lp
+
+
+def _flat(
+    value: float | int, dtype: type[np.generic], shape: tuple[int, int] = (4, 6)
+) -> np.ndarray:
+    return np.full((*shape, 3), value, dtype=dtype)
+
+
+def _images(field: ReflectanceField) -> np.ndarray:
+    """The field's radiance as images (T, H, W, 3), float64."""
+    height, width = field.image_shape or (0, 0)
+    return field.camera_slab(0).astype(np.float64).reshape(-1, height, width, 3)
+
+
+def test_a_16_bit_png_is_linear_by_default_and_srgb_when_asked(tmp_path: Path) -> None:
+    lp = _capture(tmp_path, [_flat(13107, np.uint16), _flat(65535, np.uint16)])  # 0.2 and 1.0
+    field = import_rti(lp, tmp_path / "auto.zarr", progress=False)
+    images = _images(field)
+    np.testing.assert_allclose(images[0], 0.2, rtol=0, atol=1 / 65535)
+    np.testing.assert_allclose(images[1], 1.0, rtol=0, atol=1 / 65535)
+    record = field.provenance["transfer"]
+    assert record["requested"] == "auto" and record["applied"] == "linear"
+    assert record["bit_depth"] == "16-bit"
+    assert "16-bit images decoded as linear" in field.provenance["assumed"]
+    srgb = import_rti(lp, tmp_path / "srgb.zarr", progress=False, transfer="srgb")
+    np.testing.assert_allclose(_images(srgb)[0], 0.0331048, rtol=1e-5)  # what 0.2 becomes
+    assert srgb.provenance["transfer"]["applied"] == "srgb"
+    assert "transfer 'srgb' as asked" in srgb.provenance["assumed"]
+
+
+def test_a_16_bit_tiff_is_linear_by_default(tmp_path: Path) -> None:
+    (tmp_path / "img").mkdir()
+    write_linear16_tiff(tmp_path / "img" / "a.tif", _flat(13107, np.uint16))
+    (tmp_path / "t.lp").write_text("1\nimg/a.tif 0 0 1\n", encoding="utf-8")
+    field = import_rti(tmp_path / "t.lp", tmp_path / "f.zarr", progress=False)
+    np.testing.assert_allclose(_images(field), 0.2, rtol=0, atol=1 / 65535)
+
+
+@pytest.mark.parametrize("suffix", [".png", ".jpg"])
+def test_8_bit_images_are_srgb_by_default_and_linear_when_asked(
+    tmp_path: Path, suffix: str
+) -> None:
+    lp = _capture(tmp_path, [_flat(128, np.uint8)] * 2, suffix=suffix)
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    # 128/255 encoded is 0.2158605 linear (a JPEG of a flat patch keeps the value exactly).
+    np.testing.assert_allclose(_images(field), 0.2158605, rtol=1e-6)
+    assert field.provenance["transfer"] == {
+        "requested": "auto",
+        "applied": "srgb",
+        "bit_depth": "8-bit",
+        "first_image": f"img/0{suffix}",
+        "rule": "auto: 8-bit is sRGB, 16-bit and float are linear",
+    }
+    linear = import_rti(lp, tmp_path / "g.zarr", progress=False, transfer="linear")
+    np.testing.assert_allclose(_images(linear), 128 / 255, rtol=1e-6)
+
+
+def test_the_real_capture_records_what_it_assumed(loewenkopf: ReflectanceField) -> None:
+    assert loewenkopf.provenance["transfer"]["applied"] == "srgb"
+    assert loewenkopf.provenance["transfer"]["bit_depth"] == "8-bit"
+    assert loewenkopf.provenance["mask"] is None and loewenkopf.provenance["intensities"] is None
+    assert loewenkopf.provenance["assumed"] == (
+        "rti dirs.lp: 240 8-bit images decoded as sRGB (auto: 8-bit is sRGB, 16-bit and float "
+        "are linear; transfer 'srgb' or 'linear' overrides); mask: none, every pixel counts; "
+        "intensities: none, the lights are taken as equal"
+    )
+
+
+def test_float_images_are_taken_as_stored_whatever_the_transfer(tmp_path: Path) -> None:
+    lp = _capture(tmp_path, [_flat(0.2, np.float32), _flat(3.5, np.float32)], suffix=".exr")
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False, transfer="srgb")
+    np.testing.assert_allclose(_images(field)[:, 0, 0], [[0.2] * 3, [3.5] * 3], rtol=1e-7)
+    record = field.provenance["transfer"]
+    assert record["bit_depth"] == "float" and record["applied"] == "linear"
+    assert "transfer 'srgb' does not apply to floats" in field.provenance["assumed"]
+
+
+def test_mixed_bit_depths_are_refused_naming_the_first_that_differs(tmp_path: Path) -> None:
+    images = [_flat(10, np.uint8), _flat(10, np.uint8), _flat(10, np.uint16), _flat(10, np.uint8)]
+    lp = _capture(tmp_path, images)
+    with pytest.raises(
+        DatasetError,
+        match=r"cap\.lp, line 4: image 'img/2\.png' is 16-bit, the first \('img/0\.png'\) is "
+        r"8-bit",
+    ):
+        import_rti(lp, tmp_path / "f.zarr", progress=False)
+    assert not (tmp_path / "f.zarr").exists()
+    assert not list(tmp_path.glob(".*partial*"))
+
+
+def test_the_import_prints_what_it_assumed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    lp = _capture(tmp_path, [_flat(13107, np.uint16)] * 2)
+    field = import_rti(lp, tmp_path / "f.zarr", progress=True)
+    err = capsys.readouterr().err
+    assert err.splitlines()[0] == field.provenance["assumed"]
+    assert field.provenance["assumed"].startswith("rti cap.lp: 2 16-bit images decoded as linear")
+    import_rti(lp, tmp_path / "f.zarr", progress=False)
+    assert capsys.readouterr().err == ""
+
+
+def test_a_bad_transfer_is_refused(tmp_path: Path) -> None:
+    lp = _capture(tmp_path, [_flat(1, np.uint8)])
+    with pytest.raises(
+        InputError, match=r"transfer must be 'auto', 'srgb' or 'linear', got 'gamma'"
+    ):
+        import_rti(lp, tmp_path / "f.zarr", progress=False, transfer="gamma")  # type: ignore[arg-type]
+
+
+def _mask_picture(shape: tuple[int, int] = (4, 6)) -> np.ndarray:
+    mask = np.zeros(shape, np.uint8)
+    mask[1:3, 2:5] = 255
+    mask[0, 0] = 1  # any non-zero value counts
+    return mask
+
+
+def test_a_mask_file_sets_the_visibility(tmp_path: Path) -> None:
+    lp = _capture(tmp_path, [_flat(100, np.uint8)] * 3)
+    mask = _mask_picture()
+    assert cv2.imwrite(str(tmp_path / "object.png"), mask)
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False, mask=tmp_path / "object.png")
+    np.testing.assert_array_equal(field.visibility[0], mask.reshape(-1) > 0)
+    record = field.provenance["mask"]
+    assert record["file"] == str((tmp_path / "object.png").resolve())
+    assert record["sha256"] == hashlib.sha256((tmp_path / "object.png").read_bytes()).hexdigest()
+    assert record["found"] == "mask argument" and record["pixels"] == 7
+    assert (
+        "mask: " in field.provenance["assumed"] and "7 of 24 pixels" in field.provenance["assumed"]
+    )
+    # A colour mask counts a pixel when any channel is non-zero.
+    colour = np.zeros((4, 6, 3), np.uint8)
+    colour[2, 3, 1] = 9
+    assert cv2.imwrite(str(tmp_path / "colour.png"), colour)
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False, mask=tmp_path / "colour.png")
+    assert np.flatnonzero(field.visibility[0]).tolist() == [2 * 6 + 3]
+
+
+def test_a_mask_sidecar_is_found_and_an_explicit_mask_wins(tmp_path: Path) -> None:
+    lp = _capture(tmp_path, [_flat(100, np.uint8)] * 2)
+    generic = np.zeros((4, 6), np.uint8)
+    generic[0] = 1
+    assert cv2.imwrite(str(tmp_path / "mask.png"), generic)
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    np.testing.assert_array_equal(field.visibility[0], generic.reshape(-1) > 0)
+    assert field.provenance["mask"]["found"] == "mask sidecar"
+    assert field.provenance["mask"]["file"] == str((tmp_path / "mask.png").resolve())
+    specific = _mask_picture()
+    assert cv2.imwrite(str(tmp_path / "cap.mask.png"), specific)  # <lp stem>.mask.png first
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    np.testing.assert_array_equal(field.visibility[0], specific.reshape(-1) > 0)
+    explicit = np.ones((4, 6), np.uint8)
+    assert cv2.imwrite(str(tmp_path / "all.png"), explicit)
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False, mask=tmp_path / "all.png")
+    assert field.visibility.all() and field.provenance["mask"]["found"] == "mask argument"
+    with open_field_or_rti(lp) as opened:  # the sidecar, through the opener too
+        np.testing.assert_array_equal(opened.visibility[0], specific.reshape(-1) > 0)
+    with open_field_or_rti(tmp_path, mask=tmp_path / "all.png", transfer="linear") as opened:
+        assert opened.visibility.all()
+        assert opened.provenance["transfer"]["applied"] == "linear"
+        np.testing.assert_allclose(_images(opened), 100 / 255, rtol=1e-6)
+
+
+def test_bad_masks_are_refused_and_leave_no_store(tmp_path: Path) -> None:
+    lp = _capture(tmp_path, [_flat(100, np.uint8)] * 2)
+    assert cv2.imwrite(str(tmp_path / "small.png"), _mask_picture((3, 6)))
+    with pytest.raises(
+        DatasetError,
+        match=r"mask argument .*small\.png: 6x3 pixels, the images are 6x4 \(width x height\)",
+    ):
+        import_rti(lp, tmp_path / "f.zarr", progress=False, mask=tmp_path / "small.png")
+    assert cv2.imwrite(str(tmp_path / "cap.mask.png"), np.zeros((4, 6), np.uint8))
+    with pytest.raises(DatasetError, match=r"mask sidecar .*cap\.mask\.png: every pixel is zero"):
+        import_rti(lp, tmp_path / "f.zarr", progress=False)
+    (tmp_path / "cap.mask.png").write_bytes(b"")
+    with pytest.raises(DatasetError, match=r"mask sidecar: .*cap\.mask\.png: the file is empty"):
+        import_rti(lp, tmp_path / "f.zarr", progress=False)
+    with pytest.raises(DatasetError, match=r"mask argument: .*none\.png: no such file"):
+        import_rti(lp, tmp_path / "f.zarr", progress=False, mask=tmp_path / "none.png")
+    assert not (tmp_path / "f.zarr").exists()
+
+
+def test_a_store_refuses_import_options(loewenkopf: ReflectanceField, tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="applies to an RTI capture"):
+        with open_field_or_rti(loewenkopf.path, mask=tmp_path / "m.png"):
+            pass
+    with open_field_or_rti(loewenkopf.path) as opened:
+        assert opened.shape == loewenkopf.shape
+
+
+def test_fifth_column_intensities_divide_the_images(tmp_path: Path) -> None:
+    values = [13107, 26214, 39321]  # 0.2, 0.4, 0.6 linear
+    lp = _capture(tmp_path, [_flat(v, np.uint16) for v in values], extra=["2", "0.5", "1"])
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    np.testing.assert_allclose(
+        _images(field)[:, 0, 0, 0], [0.2 / 2, 0.4 / 0.5, 0.6 / 1], rtol=0, atol=1 / 65535
+    )
+    record = field.provenance["intensities"]
+    assert record["source"] == "cap.lp fifth column" and record["values"] == [2.0, 0.5, 1.0]
+    assert "intensities: cap.lp fifth column (0.5 to 2)" in field.provenance["assumed"]
+    assert "divided" in field.light_model["note"]
+
+
+def test_mixed_columns_are_refused_at_import_with_the_line(tmp_path: Path) -> None:
+    lp = _capture(tmp_path, [_flat(1, np.uint8)] * 3, extra=["2", "", "1"])
+    with pytest.raises(DatasetError, match=r"cap\.lp, line 3: 4 columns, but line 2 has 5"):
+        import_rti(lp, tmp_path / "f.zarr", progress=False)
+
+
+def test_sidecar_intensities_divide_the_images(tmp_path: Path) -> None:
+    lp = _capture(tmp_path, [_flat(0.8, np.float32)] * 3, suffix=".exr")
+    (tmp_path / "cap.intensities").write_text(
+        "# light intensities\r\nimg/2.exr 4\r\n\r\nimg/0.exr 2\r\nimg/1.exr\t0.25\r\n",
+        encoding="utf-8",
+    )
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    np.testing.assert_allclose(_images(field)[:, 0, 0, 0], [0.4, 3.2, 0.2], rtol=1e-7)
+    record = field.provenance["intensities"]
+    assert record["source"] == str((tmp_path / "cap.intensities").resolve())
+    assert (
+        record["sha256"] == hashlib.sha256((tmp_path / "cap.intensities").read_bytes()).hexdigest()
+    )
+    assert record["values"] == [2.0, 0.25, 4.0]
+    lights = read_lp(lp)
+    np.testing.assert_array_equal(
+        read_intensity_sidecar(tmp_path / "cap.intensities", lights), [2.0, 0.25, 4.0]
+    )
+    (tmp_path / "cap.intensities").rename(tmp_path / "intensities.txt")  # the generic name
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    np.testing.assert_allclose(_images(field)[:, 0, 0, 0], [0.4, 3.2, 0.2], rtol=1e-7)
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        (
+            "img/0.png 1\nimg/1.png 1\n",
+            r"lists 2 intensities for the 3 images of cap\.lp; "
+            r"'img/2\.png' \(cap\.lp line 4\) has none",
+        ),
+        ("img/0.png 1\n", r"lists 1 intensities .* 'img/1\.png' .* has none, nor 1 more"),
+        ("img/0.png 1\nimg/9.png 1\n", r"line 2: 'img/9\.png' is not an image of cap\.lp"),
+        (
+            "img/0.png 1\n\nimg/0.png 2\n",
+            r"line 3: 'img/0\.png' already has an intensity on line 1",
+        ),
+        ("img/0.png\n", r"line 1: expected 'filename intensity'"),
+        ("img/0.png 0\n", r"line 1: intensity '0' must be a positive finite number"),
+        ("img/0.png one\n", r"line 1: intensity 'one' is not a number"),
+    ],
+)
+def test_bad_intensity_sidecars_are_refused(tmp_path: Path, text: str, match: str) -> None:
+    lp = _capture(tmp_path, [_flat(1, np.uint8)] * 3)
+    (tmp_path / "cap.intensities").write_text(text, encoding="utf-8")
+    with pytest.raises(DatasetError, match=match) as caught:
+        import_rti(lp, tmp_path / "f.zarr", progress=False)
+    assert "cap.intensities" in str(caught.value)
+    assert not (tmp_path / "f.zarr").exists()
+
+
+def test_a_fifth_column_and_a_sidecar_together_are_refused(tmp_path: Path) -> None:
+    lp = _capture(tmp_path, [_flat(1, np.uint8)] * 2, extra=["1", "2"])
+    (tmp_path / "intensities.txt").write_text("img/0.png 1\nimg/1.png 2\n", encoding="utf-8")
+    with pytest.raises(DatasetError, match=r"cap\.lp: gives intensities in a fifth column and "):
+        import_rti(lp, tmp_path / "f.zarr", progress=False)
+
+
+def test_tga_and_bmp_captures_import(tmp_path: Path) -> None:
+    rng = np.random.default_rng(3)
+    pictures = [rng.integers(0, 256, (4, 6, 3), dtype=np.uint8) for _ in range(2)]
+    (tmp_path / "img").mkdir()
+    # OpenCV has no TGA writer: Pillow writes it (RLE); OpenCV writes the BMP.
+    Image.fromarray(pictures[0]).save(tmp_path / "img" / "a.tga", compression="tga_rle")
+    assert cv2.imwrite(str(tmp_path / "img" / "b.bmp"), pictures[1][:, :, ::-1])
+    (tmp_path / "t.lp").write_text("2\nimg/a.tga 0 0 1\nimg/b.bmp 0.5 0 1\n", encoding="utf-8")
+    field = import_rti(tmp_path / "t.lp", tmp_path / "f.zarr", progress=False)
+    expected = srgb_to_linear(np.array(pictures, dtype=np.float32) / 255.0)
+    np.testing.assert_allclose(_images(field), expected, rtol=1e-6)
+    assert field.provenance["transfer"]["bit_depth"] == "8-bit"
+
+
+def test_an_empty_tga_is_refused_by_name_and_line(tmp_path: Path) -> None:
+    (tmp_path / "img").mkdir()
+    Image.fromarray(np.zeros((4, 6, 3), np.uint8)).save(tmp_path / "img" / "a.tga")
+    (tmp_path / "img" / "b.tga").write_bytes(b"")
+    (tmp_path / "t.lp").write_text("2\nimg/a.tga 0 0 1\nimg/b.tga 0.5 0 1\n", encoding="utf-8")
+    with pytest.raises(DatasetError, match=r"t\.lp, line 3: .*b\.tga: the file is empty"):
+        import_rti(tmp_path / "t.lp", tmp_path / "f.zarr", progress=False)
+    assert not (tmp_path / "f.zarr").exists()

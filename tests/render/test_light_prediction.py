@@ -9,12 +9,14 @@ from core.camera_model import PinholeCamera, camera_to_rig
 from core.directions import hemisphere_layout
 from core.errors import InputError
 from core.field_store import FieldStoreWriter, ReflectanceField
+from processing.interpolation import interpolation_weights
 from processing.sample_models import evaluate_basis
 from render.light_prediction import (
     BOUND,
     PREDICTORS,
     RBF_SIGMAS,
     choose_rbf_sigma,
+    leave_one_out_barycentric,
     make_predictor,
     rbf_weights,
 )
@@ -66,7 +68,8 @@ def test_interpolators_reproduce_the_measured_lights(tmp_path: Path) -> None:
     # the bound: these random polynomials dip below zero, which light cannot); a least-squares
     # fit of the data's own kind is exact too.
     for name, expected in (("nearest", slab), ("barycentric", slab), ("ptm", np.maximum(slab, 0)),
-                           ("lambert+residual", np.maximum(slab, 0))):  # fmt: skip
+                           ("lambert+residual", np.maximum(slab, 0)),
+                           ("adaptive", np.maximum(slab, 0))):  # fmt: skip
         predicted = make_predictor(field, name).predict(0, field.light_directions)
         np.testing.assert_allclose(predicted, expected, atol=1e-5, err_msg=name)
 
@@ -134,3 +137,15 @@ def test_every_method_has_a_predictor_and_unknown_ones_are_refused(tmp_path: Pat
         assert predictor.predict(0, direction).shape == (1, HEIGHT * WIDTH, 3)
     with pytest.raises(InputError, match="unknown method 'splines'"):
         make_predictor(field, "splines")
+
+
+def test_leave_one_out_barycentric_rebuilds_the_triangulation_without_the_light() -> None:
+    lights = hemisphere_layout(20, "fibonacci")
+    values = lights[:, 2:3] ** 2 + 0.1 * lights[:, :1]  # smooth in the light direction
+    held_out = leave_one_out_barycentric(lights, values)
+    for j in (0, 7, 19):
+        others = np.delete(np.arange(20), j)
+        weights = interpolation_weights(lights[others], lights[j : j + 1], "barycentric",
+                                        policy="clamp")  # fmt: skip
+        np.testing.assert_allclose(held_out[j], weights.apply(values[others])[0])
+    assert not np.allclose(held_out, values)  # the light itself never helps predict it
