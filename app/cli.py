@@ -392,6 +392,7 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         help="pre-filter the panorama into GRID x 2 GRID directions (default 32; error measured "
         "in the docs); 0 = every pixel (exact, slow)",
     )
+    _add_renderer_options(render, spp=4096)
     render.add_argument("-o", "--output", type=output_file, required=True, help="output .exr")
     render.set_defaults(handler=_run_sim_render)
 
@@ -443,6 +444,7 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     )
     _add_camera_options(field)
     field.add_argument("--dtype", choices=("float32", "float16"), default="float32")
+    _add_renderer_options(field, spp=256)
     field.add_argument(
         "--overwrite",
         action="store_true",
@@ -453,6 +455,25 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     )
     field.set_defaults(handler=_run_sim_field)
 
+    rti = sim_commands.add_parser(
+        "rti",
+        help="an RTI capture of a path-traced world: images, fit.lp and test.lp",
+        description="Path-trace a world (sim/worlds or a world .toml) seen from straight above "
+        "under a dome of directional lights, as an RTI dome records it: linear 16-bit TIFF "
+        "images, fit.lp (the lights to fit, a Fibonacci dome) and test.lp (other lights, a "
+        "grid, to predict), with masks of the object (fit.mask.png, test.mask.png). Then: "
+        "rig evaluate DIR/fit.lp --test DIR/test.lp.",
+    )
+    rti.add_argument("--scene", required=True, help="world name (sim/worlds) or world .toml")
+    rti.add_argument("--lights", type=count, default=49, help="lights to fit (default 49)")
+    rti.add_argument("--test-lights", type=count, default=20,
+                     help="other lights to predict (default 20)")  # fmt: skip
+    rti.add_argument("--size", type=image_size, default=(128, 96), help="WxH (default 128x96)")
+    rti.add_argument("--spp", type=count, default=256, help="samples per pixel (default 256)")
+    rti.add_argument("--max-depth", type=count, default=8, help="path length (default 8)")
+    rti.add_argument("-o", "--output", type=output_directory, required=True, help="new folder")
+    rti.set_defaults(handler=_run_sim_rti)
+
 
 def _add_camera_options(p: argparse.ArgumentParser) -> None:
     """Camera flags shared by every command that renders a view (same defaults everywhere)."""
@@ -461,6 +482,25 @@ def _add_camera_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--size", type=image_size, default=(512, 512), help="image WIDTHxHEIGHT (512x512)"
     )
+
+
+def _add_renderer_options(p: argparse.ArgumentParser, *, spp: int) -> None:
+    """``--renderer`` and the path tracer's settings (``sim field`` and ``sim render``)."""
+    p.add_argument(
+        "--renderer",
+        choices=("direct", "mitsuba"),
+        default="direct",
+        help="direct: the simulator's scenes, direct light (exact for what the models fit); "
+        "mitsuba: a path-traced world (--scene names one of sim/worlds or a world .toml; "
+        "interreflections, materials outside every fitted model; docs/world.md)",
+    )
+    p.add_argument(
+        "--spp",
+        type=count,
+        default=spp,
+        help=f"mitsuba: samples per pixel (default {spp}; noise in docs/world.md)",
+    )
+    p.add_argument("--max-depth", type=count, default=8, help="mitsuba: path length (default 8)")
 
 
 def _run_sim_field(args: argparse.Namespace) -> int:
@@ -474,21 +514,47 @@ def _run_sim_field(args: argparse.Namespace) -> int:
         width=args.size[0],
         height=args.size[1],
     )
-    simulate_field(
-        args.output,
-        args.scene,
-        lights=args.lights,
-        cameras=cameras,
-        points=args.points,
-        layout=args.layout,
-        dtype=args.dtype,
-        progress=True,
-        overwrite=args.overwrite,
-    )
+    if args.renderer == "mitsuba":
+        from sim.mitsuba_world import load_world, render_world_field
+
+        render_world_field(
+            args.output, load_world(args.scene), lights=args.lights, cameras=cameras,
+            points=args.points, spp=args.spp, max_depth=args.max_depth, layout=args.layout,
+            dtype=args.dtype, progress=True, overwrite=args.overwrite,
+        )  # fmt: skip
+    else:
+        simulate_field(
+            args.output,
+            args.scene,
+            lights=args.lights,
+            cameras=cameras,
+            points=args.points,
+            layout=args.layout,
+            dtype=args.dtype,
+            progress=True,
+            overwrite=args.overwrite,
+        )
     print(
         f"{args.scene}: {args.cameras} cameras x {args.lights} lights x {args.points} points "
         f"-> {args.output}"
     )
+    return 0
+
+
+def _run_sim_rti(args: argparse.Namespace) -> int:
+    from bench.held_out import make_world_rti
+    from sim.mitsuba_world import load_world
+
+    out: Path = args.output
+    if out.exists() and any(out.iterdir()):
+        raise InputError(f"{out}: exists and is not empty; an RTI capture needs a new folder")
+    world = load_world(args.scene)  # a bad world is refused before anything renders
+    width, height = args.size
+    spec = (args.lights, args.test_lights, width, height, args.spp)
+    make_world_rti(out, str(world.source), spec, max_depth=args.max_depth, progress=True)
+    print(f"{world.name}: {args.lights} fit + {args.test_lights} test lights, {width}x{height}, "
+          f"{args.spp} spp -> {out}/ (rig evaluate {out / 'fit.lp'} --test "
+          f"{out / 'test.lp'})")  # fmt: skip
     return 0
 
 
@@ -501,13 +567,28 @@ def _run_sim_render(args: argparse.Namespace) -> int:
 
     if not args.output.suffix.lower() == ".exr":
         raise RigError(f"{args.output}: the ground truth is written as OpenEXR (.exr)")
-    spec = get_scene(args.scene)
+    if args.renderer == "mitsuba":
+        from sim.mitsuba_world import load_world
+
+        world = load_world(args.scene)  # a bad world file is refused before the panorama
+    else:
+        spec = get_scene(args.scene)
     panorama = read_panorama(args.env)
     if panorama.note:
         print(panorama.note)
     camera = PinholeCamera(
         args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
     )
+    if args.renderer == "mitsuba":
+        from sim.mitsuba_world import render_world_environment
+
+        rgb, alpha = render_world_environment(
+            world, panorama.rgb, camera, spp=args.spp, max_depth=args.max_depth
+        )
+        write_exr(args.output, rgb, alpha)
+        print(f"{world.name} (path-traced, {args.spp} spp) under {panorama.source} -> "
+              f"{args.output}")  # fmt: skip
+        return 0
     samples = build_scene(spec.name, args.points)
     image = render_environment(
         samples,

@@ -31,20 +31,29 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from core.camera_model import rig_to_camera
 from core.directions import hemisphere_layout
 from core.field_store import ReflectanceField
 from core.sample_data import rti_capture_path
-from processing.rti import open_field_or_rti
-from render.evaluation import Evaluation, evaluate, split_lights
+from processing.rti import open_field_or_rti, write_rti_capture
+from render.evaluation import Evaluation, evaluate, split_lights, test_field_from_lp
 from render.light_prediction import PREDICTORS
 from sim.field import field_cameras, simulate_field
+from sim.mitsuba_world import DEFAULT_MAX_DEPTH, load_world, render_world_field
+from sim.world_rti import render_world_rti
 
 __all__ = [
+    "RTI_SPEC",
+    "WORLD_TEST_LIGHTS",
     "HeldOutRecord",
+    "WorldSpec",
     "format_held_out",
     "held_out_chart",
     "held_out_record",
+    "make_world_rti",
     "run_held_out",
+    "world_fields",
+    "world_rti_captures",
 ]
 
 Family = Literal["real", "path-traced", "own family"]
@@ -114,6 +123,93 @@ def _timed(
     return held_out_record(dataset, family, split, result, time.perf_counter() - start)
 
 
+#: A path-traced field of the study: (cameras, lights, image side, samples per pixel, points).
+WorldSpec = tuple[int, int, int, int, int]
+#: Test lights of a path-traced field: a grid, which never meets the fit lights' Fibonacci set.
+WORLD_TEST_LIGHTS = 8
+
+
+def world_fields(
+    fields_dir: Path, names: Sequence[str], spec: WorldSpec, *, progress: bool = False
+) -> list[tuple[str, Path, Path]]:
+    """Render (once; cached in ``fields_dir``) the fit and test fields of each world.
+
+    Parameters
+    ----------
+    fields_dir : Path, where the stores are kept between runs
+    names : bundled worlds (:data:`sim.mitsuba_world.WORLDS`)
+    spec : WorldSpec
+    progress : bool, progress bars while rendering
+
+    Returns
+    -------
+    list of (name, fit store, test store)
+    """
+    cameras, lights, side, spp, points = spec
+    views = field_cameras(cameras, width=side, height=side)
+    made = []
+    for name in names:
+        world = load_world(name)
+        stem = fields_dir / f"world-{name}-{cameras}x{lights}-{side}px-{spp}spp-{points}"
+        fit, test = stem.with_suffix(".zarr"), stem.with_name(stem.name + "-test.zarr")
+        if not fit.exists():
+            render_world_field(fit, world, lights=lights, cameras=views, points=points, spp=spp,
+                               layout="fibonacci", progress=progress)  # fmt: skip
+        if not test.exists():
+            render_world_field(test, world, lights=hemisphere_layout(WORLD_TEST_LIGHTS, "grid"),
+                               cameras=views, points=points, spp=spp,
+                               progress=progress)  # fmt: skip
+        made.append((name, fit, test))
+    return made
+
+
+#: An RTI-style capture of a world: (fit lights, test lights, width, height, samples per
+#: pixel); 49 to fit and 20 to predict, as the synthetic RTI benchmarks split their domes.
+RtiSpec = tuple[int, int, int, int, int]
+RTI_SPEC: RtiSpec = (49, 20, 128, 96, 256)
+
+
+def make_world_rti(
+    folder: Path,
+    world: str,
+    spec: RtiSpec,
+    *,
+    max_depth: int = DEFAULT_MAX_DEPTH,
+    progress: bool = False,
+) -> None:
+    """Path-trace an RTI capture of ``world`` into ``folder``: fit.lp, test.lp, images, masks.
+
+    The fit lights are a Fibonacci dome, the test lights a grid (the two never coincide); one
+    exposure for both sets puts 90 % of 16-bit white at the object's 99.9th percentile.
+    """
+    fit_count, test_count, width, height, spp = spec
+    fit = render_world_rti(world, fit_count, width=width, height=height, spp=spp,
+                           max_depth=max_depth, progress=progress)  # fmt: skip
+    test = render_world_rti(world, hemisphere_layout(test_count, "grid"), width=width,
+                            height=height, spp=spp, max_depth=max_depth, seed=1,
+                            progress=progress)  # fmt: skip
+    covered = np.concatenate([fit.images[:, fit.alpha >= 0.5], test.images[:, test.alpha >= 0.5]])
+    scale = 0.9 / max(float(np.percentile(covered, 99.9)), 1e-12)
+    for name, capture in (("fit", fit), ("test", test)):
+        directions = rig_to_camera(capture.directions, capture.camera)
+        write_rti_capture(folder, name, capture.images, directions, scale=scale,
+                          mask=capture.alpha >= 0.5)  # fmt: skip
+
+
+def world_rti_captures(
+    fields_dir: Path, names: Sequence[str], spec: RtiSpec, *, progress: bool = False
+) -> list[tuple[str, Path, Path]]:
+    """Make (once; cached in ``fields_dir``) an RTI capture of each world: (name, fit, test)."""
+    made = []
+    for name in names:
+        fit_count, test_count, width, height, spp = spec
+        folder = fields_dir / f"rti-{name}-{fit_count}+{test_count}-{width}x{height}-{spp}spp"
+        if not (folder / "test.lp").is_file():
+            make_world_rti(folder, name, spec, progress=progress)
+        made.append((name, folder / "fit.lp", folder / "test.lp"))
+    return made
+
+
 #: Splits of the real capture: interleaved, whole rings unseen, and random halves.
 REAL_SPLITS = ("every-other", "rings", "random:0")
 
@@ -123,6 +219,7 @@ def run_held_out(
     *,
     quick: bool,
     worlds: Sequence[tuple[str, Path, Path]] = (),
+    rti_worlds: Sequence[tuple[str, Path, Path]] = (),
     methods: Sequence[str] = PREDICTORS,
 ) -> list[HeldOutRecord]:
     """Evaluate every method on the real capture, the given path-traced fields and the simulator.
@@ -132,6 +229,7 @@ def run_held_out(
     fields_dir : Path, where the simulator's fields are made once and reused
     quick : bool, one split of the real capture and a smaller simulated field
     worlds : (name, fit store, test store) of path-traced fields (same views, other lights)
+    rti_worlds : (name, fit .lp, test .lp) of path-traced RTI captures
     methods : names of :data:`render.light_prediction.PREDICTORS`
 
     Returns
@@ -144,6 +242,11 @@ def run_held_out(
             fit_index, test_index = split_lights(capture, split)
             fit, test = capture.subset(lights=fit_index), capture.subset(lights=test_index)
             records.append(_timed("RTI lion (bundled)", "real", split, fit, test, methods))
+    for name, fit_lp, test_lp in rti_worlds:
+        with open_field_or_rti(fit_lp) as fit:
+            test = test_field_from_lp(test_lp)
+            records.append(_timed(f"{name} (RTI dome)", "path-traced", "other lights", fit,
+                                  test, methods))  # fmt: skip
     for name, fit_path, test_path in worlds:
         fit, test = ReflectanceField.open(fit_path), ReflectanceField.open(test_path)
         records.append(_timed(name, "path-traced", "other lights", fit, test, methods))
@@ -162,6 +265,13 @@ def run_held_out(
     records.append(_timed("glossy sphere (simulator)", "own family", "other lights", fit, test,
                           methods))  # fmt: skip
     return records
+
+
+def _psnr(scores: MethodScores) -> float:
+    """A method's PSNR for ranking: inf when exact, -inf when it did not apply."""
+    if scores["ssim"] is None:
+        return -math.inf
+    return math.inf if scores["psnr"] is None else float(scores["psnr"])
 
 
 def _value(scores: MethodScores, key: str) -> float:
@@ -194,13 +304,12 @@ def format_held_out(records: Sequence[HeldOutRecord]) -> str:
             "| method | PSNR (dB) | vs rbf (dB) | SSIM | ΔE2000 | rel. RMSE | s |",
             "|---|---:|---:|---:|---:|---:|---:|",
         ]
-        ranked = sorted(record["methods"].items(), key=lambda kv: -_value(kv[1], "psnr")
-                        if not math.isnan(_value(kv[1], "psnr")) else math.inf)  # fmt: skip
+        ranked = sorted(record["methods"].items(), key=lambda kv: -_psnr(kv[1]))
         for name, scores in ranked:
-            psnr = _value(scores, "psnr")
-            if math.isnan(psnr):
-                lines.append(f"| {name} | | | | | | | ")
+            if scores["ssim"] is None:  # not applicable (the note says why)
+                lines.append(f"| {name} | {scores['note']} | | | | | |")
                 continue
+            psnr = _psnr(scores)
             lines.append(
                 f"| {name} | {psnr:.2f} | {psnr - rbf:+.2f} | {_value(scores, 'ssim'):.4f} | "
                 f"{_value(scores, 'delta_e'):.2f} | {_value(scores, 'rel_rmse'):.1%} | "
@@ -219,10 +328,10 @@ def held_out_chart(records: Sequence[HeldOutRecord], path: Path) -> None:
     baselines = {"nearest", "barycentric", "rbf", "ptm", "hsh2", "hsh3", "ptm-8bit",
                  "hsh2-8bit", "hsh3-8bit"}  # fmt: skip
     for ax, record in zip(axes[:, 0], records, strict=True):
-        names = [
-            n for n in record["methods"] if not math.isnan(_value(record["methods"][n], "psnr"))
-        ]
-        values = [_value(record["methods"][n], "psnr") for n in names]
+        names = [n for n in record["methods"] if math.isfinite(_psnr(record["methods"][n]))]
+        values = [_psnr(record["methods"][n]) for n in names]
+        if not values:
+            continue
         colours = ["#999999" if n in baselines else "#c0392b" for n in names]
         ax.bar(np.arange(len(names)), values, color=colours)
         ax.set_xticks(np.arange(len(names)), names, rotation=30, ha="right", fontsize=7)

@@ -39,7 +39,7 @@ import numba
 import numpy as np
 
 from bench.advisor import validate_advisor
-from bench.held_out import run_held_out
+from bench.held_out import run_held_out, world_fields, world_rti_captures
 from bench.report import write_report
 from bench.stability import run_stability
 from bench.suite_fields import (
@@ -162,7 +162,12 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
     held_out = []
     if config.held_out_methods:
         quick = config.name != "full"
-        held_out = run_held_out(fields_dir, quick=quick, methods=config.held_out_methods)
+        worlds = world_fields(fields_dir, config.held_out_worlds, config.world_field)
+        domes = world_rti_captures(fields_dir, config.rti_worlds, config.rti_capture)
+        held_out = run_held_out(
+            fields_dir, quick=quick, worlds=worlds, rti_worlds=domes,
+            methods=config.held_out_methods,
+        )  # fmt: skip
     at_end: MachineRecord = {
         **at_start,
         "load_average_end": list(os.getloadavg()),

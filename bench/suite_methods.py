@@ -172,6 +172,11 @@ class SuiteConfig:
     advisor_samples : samples the advisor predicts on
     held_out_methods : the methods of the held-out-light study (:mod:`bench.held_out`);
         empty to skip it
+    held_out_worlds, world_field : the path-traced worlds of that study (Mitsuba 3,
+        :mod:`sim.mitsuba_world`) and their fields: (cameras, lights, image side, samples per
+        pixel, points)
+    rti_worlds, rti_capture : the worlds of that study captured as RTI domes: (fit lights,
+        test lights, width, height, samples per pixel)
     """
 
     name: str
@@ -193,6 +198,10 @@ class SuiteConfig:
     advisor_environments: tuple[str, ...] = ("courtyard", "sky")
     advisor_samples: int = 2000
     held_out_methods: tuple[str, ...] = PREDICTORS
+    held_out_worlds: tuple[str, ...] = ()
+    world_field: tuple[int, int, int, int, int] = (8, 30, 96, 256, 8000)
+    rti_worlds: tuple[str, ...] = ()
+    rti_capture: tuple[int, int, int, int, int] = (49, 20, 128, 96, 256)
 
 
 def config_record(config: SuiteConfig) -> ConfigRecord:
@@ -226,6 +235,10 @@ def config_record(config: SuiteConfig) -> ConfigRecord:
         "advisor_environments": config.advisor_environments,
         "advisor_samples": config.advisor_samples,
         "held_out_methods": list(config.held_out_methods),
+        "held_out_worlds": list(config.held_out_worlds),
+        "world_field": list(config.world_field),
+        "rti_worlds": list(config.rti_worlds),
+        "rti_capture": list(config.rti_capture),
     }
 
 
@@ -260,6 +273,13 @@ FULL = SuiteConfig(
     capture=(4, 6, 64),
     loop_field=((30, 30, 250_000, 512), "float16"),
     advisor_fields=((10, 10, 20_000, 128), (20, 20, 20_000, 128), (30, 30, 20_000, 128)),
+    # A diffuse-like, a coloured metal and a layered coat, path-traced once (about 6 minutes
+    # each, cached) at 256 samples per pixel: per-sample noise 0.6-2.8 % (docs/world.md).
+    held_out_worlds=("matte-relief", "copper-bowl", "clearcoat-relief"),
+    world_field=(8, 30, 96, 256, 8000),
+    # RTI domes of the flat-ish worlds, 49 lights to fit and 20 to predict (about 2 minutes
+    # each at 128 x 96 and 256 samples per pixel, cached).
+    rti_worlds=("matte-relief", "clearcoat-relief", "brushed-knot"),
 )
 
 QUICK = SuiteConfig(
@@ -279,4 +299,8 @@ QUICK = SuiteConfig(
     advisor_scenes=("glossy-sphere",),
     advisor_environments=("courtyard",),
     advisor_samples=1000,
+    held_out_worlds=("copper-bowl",),
+    world_field=(4, 24, 64, 64, 3000),
+    rti_worlds=("clearcoat-relief",),
+    rti_capture=(49, 20, 64, 48, 64),
 )

@@ -165,6 +165,10 @@ class ConfigRecord(TypedDict):
     advisor_environments: Sequence[str]
     advisor_samples: int
     held_out_methods: Sequence[str]
+    held_out_worlds: Sequence[str]
+    world_field: Sequence[int]
+    rti_worlds: Sequence[str]
+    rti_capture: Sequence[int]
 
 
 class Machine(TypedDict):

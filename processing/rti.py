@@ -70,6 +70,8 @@ from core.image_io import (
     linear_from_pixels,
     pixel_depth,
     read_pixels,
+    write_linear16_tiff,
+    write_srgb8,
 )
 
 __all__ = [
@@ -85,6 +87,7 @@ __all__ = [
     "read_lp",
     "rti_camera",
     "write_lp",
+    "write_rti_capture",
 ]
 
 #: Nominal camera distance (scene units) of an imported RTI view: the data do not record it.
@@ -804,6 +807,47 @@ def _intensities(
     record["values"] = [float(value) for value in values]
     record["rule"] = "each image divided by its light's intensity"
     return values, record
+
+
+def write_rti_capture(
+    folder: str | os.PathLike[str],
+    name: str,
+    images: NDArray[np.floating],
+    directions: ArrayLike,
+    *,
+    scale: float,
+    mask: NDArray[np.bool_] | None = None,
+) -> Path:
+    """Write an RTI capture as a dome would leave it: images, ``NAME.lp`` and ``NAME.mask.png``.
+
+    Parameters
+    ----------
+    folder : the capture's folder (created)
+    name : the ``.lp`` file's stem; images are ``images/NAME_NNN.tif``
+    images : ndarray, shape (T, H, W, 3), linear radiance
+    directions : array_like, shape (T, 3), toward each light in the camera frame
+    scale : float > 0, the radiance written as 16-bit white (values above are clipped)
+    mask : ndarray (H, W) of bool, or None: the object's pixels (the sidecar the import reads)
+
+    Returns
+    -------
+    Path of the ``.lp`` file. Images are linear 16-bit TIFF (:func:`import_rti` reads 16-bit
+    as linear by default).
+    """
+    root = Path(folder)
+    pictures = np.asarray(images, dtype=np.float64)
+    if pictures.ndim != 4 or pictures.shape[3] != 3 or not scale > 0:
+        raise InputError(f"images must be (T, H, W, 3) and scale positive, got {pictures.shape}")
+    files = [f"images/{name}_{t:03d}.tif" for t in range(len(pictures))]
+    for file, image in zip(files, pictures, strict=True):
+        levels = np.round(np.clip(image * scale, 0.0, 1.0) * 65535.0).astype(np.uint16)
+        write_linear16_tiff(root / file, levels)
+    lp = root / f"{name}.lp"
+    write_lp(lp, files, directions)
+    if mask is not None:
+        picture = np.where(np.asarray(mask, dtype=bool), 255, 0).astype(np.uint8)
+        write_srgb8(root / f"{name}.mask.png", np.repeat(picture[:, :, None], 3, axis=2))
+    return lp
 
 
 def export_lp(

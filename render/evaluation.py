@@ -5,7 +5,8 @@ predict (the test lights), or a second capture of other lights is given as the t
 method (:mod:`render.light_prediction`) predicts every test image from the fit lights alone,
 and :mod:`processing.image_quality` scores it against the measured image: PSNR and SSIM of the
 8-bit sRGB images, mean CIEDE2000, relative RMSE in linear light. Means are over the test
-images (per-image PSNR averaged, as NeuralRTI's evaluation does).
+images; the mean PSNR is that of the mean squared error over them (relight's protocol: a
+single exactly predicted image would make a mean of PSNRs infinite).
 
 Images: a field of pixels is its one view; a field of points is splatted into each captured
 camera's image (:func:`render.splat.plan_splats`), the metrics taken over the pixels it covers.
@@ -228,6 +229,17 @@ def _check_pair(fit: ReflectanceField, test: ReflectanceField) -> None:
         raise InputError(f"{test.path}: its cameras are not the field's")
 
 
+def _psnr_of_mean_mse(psnrs: Sequence[float]) -> float:
+    """PSNR of the test images' mean squared error (relight's protocol).
+
+    Finite unless every image is predicted exactly, and not owned by one perfect image as a
+    mean of PSNRs is.
+    """
+    mse = [255.0**2 * 10.0 ** (-p / 10.0) for p in psnrs]  # inf PSNR: 0
+    mean = float(np.mean(mse))
+    return math.inf if mean == 0 else 20.0 * math.log10(255.0) - 10.0 * math.log10(mean)
+
+
 class _Views:
     """How a camera's sample values become an image, and which pixels count."""
 
@@ -319,7 +331,7 @@ def evaluate(
             for q in range(t_test)
         )
         mean = ImageQuality(
-            psnr=float(np.mean([q.psnr for q in scores])),
+            psnr=_psnr_of_mean_mse([q.psnr for q in scores]),
             ssim=float(np.mean([q.ssim for q in scores])),
             delta_e=float(np.mean([q.delta_e for q in scores])),
             rel_rmse=float(np.mean([q.rel_rmse for q in scores])),

@@ -97,9 +97,11 @@ __all__ = [
     "ENVMAP_TO_RIG",
     "MitsubaUnavailableError",
     "ReferenceImage",
+    "camera_to_world",
     "envmap_texels",
     "load_mitsuba",
     "mitsuba_scene_dict",
+    "perspective_sensor",
     "render_reference",
 ]
 
@@ -153,6 +155,39 @@ def load_mitsuba(variant: str = DEFAULT_VARIANT) -> Any:
             )
         mi.set_variant(variant)
     return mi
+
+
+def camera_to_world(mi: Any, camera: PinholeCamera) -> Any:
+    """Mitsuba's ``to_world`` of ``camera``: ``look_at`` from its position along its axes."""
+    _, up, forward = camera.axes()
+    return mi.ScalarTransform4f().look_at(
+        origin=[float(c) for c in camera.position],
+        target=[float(c) for c in camera.position + forward],
+        up=[float(c) for c in up],
+    )
+
+
+def perspective_sensor(mi: Any, camera: PinholeCamera, sampler: dict[str, Any]) -> dict[str, Any]:
+    """The ``perspective`` sensor of ``camera`` on the project's pixel grid (see the module).
+
+    RGBA float film with a box filter (each pixel its own square, as the splats approximate
+    it), ``sampler`` the sampler's dictionary.
+    """
+    return {
+        "type": "perspective",
+        "fov": float(camera.fov_deg),
+        "fov_axis": "x",
+        "to_world": camera_to_world(mi, camera),
+        "film": {
+            "type": "hdrfilm",
+            "width": camera.width,
+            "height": camera.height,
+            "rfilter": {"type": "box"},
+            "pixel_format": "rgba",
+            "component_format": "float32",
+        },
+        "sampler": sampler,
+    }
 
 
 def envmap_texels(rgb: NDArray[np.floating], upsample: int = 4) -> NDArray[np.float32]:
@@ -244,8 +279,6 @@ def mitsuba_scene_dict(
             f"need spp >= 1 and at least one emitter or BSDF sample, got spp={spp}, "
             f"emitter_samples={emitter_samples}, bsdf_samples={bsdf_samples}"
         )
-    _, up, forward = camera.axes()
-    position = camera.position
     bitmap = mi.Bitmap(envmap_texels(rgb, upsample))
     to_rig = np.eye(4)
     to_rig[:3, :3] = ENVMAP_TO_RIG
@@ -257,25 +290,9 @@ def mitsuba_scene_dict(
             "bsdf_samples": bsdf_samples,
             "hide_emitters": True,
         },
-        "sensor": {
-            "type": "perspective",
-            "fov": float(camera.fov_deg),
-            "fov_axis": "x",
-            "to_world": mi.ScalarTransform4f().look_at(
-                origin=[float(c) for c in position],
-                target=[float(c) for c in position + forward],
-                up=[float(c) for c in up],
-            ),
-            "film": {
-                "type": "hdrfilm",
-                "width": camera.width,
-                "height": camera.height,
-                "rfilter": {"type": "box"},
-                "pixel_format": "rgba",
-                "component_format": "float32",
-            },
-            "sampler": {"type": "multijitter", "sample_count": spp, "seed": seed},
-        },
+        "sensor": perspective_sensor(
+            mi, camera, {"type": "multijitter", "sample_count": spp, "seed": seed}
+        ),
         "environment": {
             "type": "envmap",
             "bitmap": bitmap,

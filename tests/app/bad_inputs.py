@@ -1194,6 +1194,35 @@ def _cases() -> list[Case]:
             prepare=two_lights_lp,
         ),
     ]
+    # path-traced worlds
+    cases += [
+        Case(
+            "sim field: unknown world",
+            (*field, "--renderer", "mitsuba", "--scene", "nowhere", "-o", "{tmp}/f.zarr"),
+            ("unknown world 'nowhere'",),
+        ),
+        Case(
+            "sim rti: unknown world",
+            ("sim", "rti", "--scene", "nowhere", "-o", "{tmp}/d"),
+            ("unknown world 'nowhere'",),
+        ),
+        Case(
+            "sim rti: a world file with a bad shape",
+            ("sim", "rti", "--scene", F + "bad.toml", "-o", "{tmp}/d"),
+            ("bad.toml",),
+        ),
+        Case(
+            "sim rti: -o a non-empty folder",
+            ("sim", "rti", "--scene", "matte-relief", "-o", "{tmp}/taken"),
+            ("taken", "not empty"),
+            prepare=an_output_folder,
+        ),
+        Case(
+            "sim rti: --spp 0",
+            ("sim", "rti", "--scene", "matte-relief", "--spp", "0", "-o", "{tmp}/d"),
+            ("--spp",),
+        ),
+    ]
     # rig bench and rig demo
     cases += [
         Case("bench: -o a file", ("bench", "--quick", "-o", F + "existing.txt"), ("existing.txt",)),

@@ -36,8 +36,8 @@ def test_the_sweep_covers_every_sub_command() -> None:
     }
     assert commands >= {
         "sample", "relight", "verify", "process", "capture", "plan", "advise", "evaluate",
-        "export-lp", "calibrate", "doctor", "sim start", "sim field", "sim render", "sim photo",
-        "bench", "demo",
+        "export-lp", "calibrate", "doctor", "sim start", "sim field", "sim render",
+        "sim photo", "sim rti", "bench", "demo",
     }  # fmt: skip
     assert len({case.name for case in CASES}) == len(CASES)
 

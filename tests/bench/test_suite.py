@@ -112,3 +112,18 @@ def test_cli_parser() -> None:
     add_bench_parser(parser.add_subparsers(dest="command"))
     args = parser.parse_args(["bench", "--quick", "-o", "out"])
     assert args.quick and args.output == Path("out") and callable(args.handler)
+
+
+def test_world_fields_are_rendered_once(tmp_path: Path) -> None:
+    from bench.held_out import WORLD_TEST_LIGHTS, world_fields
+    from core.field_store import ReflectanceField
+
+    spec = (2, 6, 24, 4, 300)
+    ((name, fit, test),) = world_fields(tmp_path / "fields", ["matte-relief"], spec)
+    assert name == "matte-relief"
+    assert ReflectanceField.open(fit).shape == (2, 6, 300)
+    assert ReflectanceField.open(test).shape == (2, WORLD_TEST_LIGHTS, 300)
+    assert ReflectanceField.open(fit).provenance["source"] == "mitsuba"
+    stamp = fit.stat().st_mtime_ns
+    world_fields(tmp_path / "fields", ["matte-relief"], spec)  # cached: not rendered again
+    assert fit.stat().st_mtime_ns == stamp
