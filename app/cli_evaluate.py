@@ -133,7 +133,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 
 def _lp_names(path: Path) -> list[str]:
-    from processing.rti import read_lp
+    from processing.rti_lp import read_lp
 
     return list(read_lp(path).files)
 
@@ -155,7 +155,7 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
     from core.camera_model import camera_to_rig
     from core.image_io import write_exr, write_srgb8
     from processing.image_quality import display_8bit, display_scale
-    from processing.rti import read_lp
+    from processing.rti_lp import read_lp
     from render.evaluation import evaluate, split_lights
     from render.light_prediction import make_predictor
 

@@ -11,7 +11,7 @@ import pytest
 from app.cli import main
 from core.image_io import read_pixels
 from core.sample_data import rti_capture_path
-from processing.rti import read_lp
+from processing.rti_lp import read_lp
 
 RTI = rti_capture_path().parent
 

@@ -10,7 +10,7 @@ from capture.lp_export import export_lp, light_in_camera_frame
 from core.camera_model import PinholeCamera, rig_to_camera
 from core.directions import direction_from_angles_deg
 from core.errors import DatasetError, InputError
-from processing.rti import read_lp
+from processing.rti_lp import read_lp
 
 CAMERAS = [(0.0, 0.0), (30.0, 60.0), (250.0, 90.0)]  # (azimuth, inclination) degrees
 LIGHTS = [(0.0, 10.0), (45.0, 40.0), (170.0, 75.0), (300.0, 89.0), (90.0, 0.0)]

@@ -17,16 +17,8 @@ from core.errors import DatasetError, InputError
 from core.field_store import ReflectanceField
 from core.image_io import read_linear, write_exr, write_linear16_tiff
 from core.sample_data import rti_capture_path
-from processing.rti import (
-    LightPositions,
-    export_lp,
-    import_rti,
-    open_field_or_rti,
-    read_intensity_sidecar,
-    read_lp,
-    rti_camera,
-    write_lp,
-)
+from processing.rti import export_lp, import_rti, open_field_or_rti, rti_camera
+from processing.rti_lp import LightPositions, read_intensity_sidecar, read_lp, write_lp
 
 LOEWENKOPF_LP = rti_capture_path()
 LOEWENKOPF = LOEWENKOPF_LP.parent
