@@ -199,6 +199,7 @@ def _relight_field(
     args: argparse.Namespace, field: Any, panorama: Any, modulation: Any, suffix: str
 ) -> int:
     from core.camera_model import PinholeCamera
+    from core.splat import require_outside
     from processing.environment import adjust_environment
     from render.output import IMAGE_SUFFIXES, write_image, write_sequence
     from render.relight_mode import open_relighter
@@ -214,6 +215,7 @@ def _relight_field(
         camera = PinholeCamera(
             args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
         )
+        require_outside(field.points, camera)  # before the mode is chosen (a fit can be slow)
     s_count, t_count, _ = field.shape
     for flag, value, have, what in (("-m", args.m, t_count, "lights"),
                                     ("-n", args.n, s_count, "cameras")):  # fmt: skip

@@ -32,6 +32,7 @@ __all__ = [
     "depth_at_points",
     "disk_bounds",
     "for_each_cover",
+    "require_outside",
     "shown_points",
     "splat_weight",
     "zbuffer",
@@ -64,6 +65,28 @@ class CameraSplats:
     tolerance: float
 
 
+def require_outside(points: NDArray[np.floating], camera: PinholeCamera) -> None:
+    """Refuse a camera within the points' bounding sphere (about the rig's origin).
+
+    Inside it a camera sees the surface from behind or not at all: the picture would be black,
+    not an error. Callers with slow work before the first view check this first.
+
+    Raises
+    ------
+    InputError
+        Naming the distance and the object's radius.
+    """
+    cloud = np.asarray(points, dtype=np.float64)
+    if len(cloud) == 0:
+        raise InputError("the object has no points")
+    bounding = float(np.sqrt(np.max(np.einsum("pk,pk->p", cloud, cloud))))
+    if camera.distance <= bounding:
+        raise InputError(
+            f"camera distance {camera.distance:g} is inside the object (bounding radius "
+            f"{bounding:.3g}); move the camera further out (--distance)"
+        )
+
+
 def camera_splats(
     points: NDArray[np.floating],
     normals: NDArray[np.floating],
@@ -80,16 +103,7 @@ def camera_splats(
     points one small splat covers on a steep surface near the silhouette still blend.
     """
     cloud = np.asarray(points, dtype=np.float64)
-    if len(cloud) == 0:
-        raise InputError("the object has no points")
-    # Inside the object's bounding sphere a camera sees the surface from behind or not at all:
-    # the picture would be black, not an error.
-    bounding = float(np.sqrt(np.max(np.einsum("pk,pk->p", cloud, cloud))))
-    if camera.distance <= bounding:
-        raise InputError(
-            f"camera distance {camera.distance:g} is inside the object (bounding radius "
-            f"{bounding:.3g}); move the camera further out (--distance)"
-        )
+    require_outside(cloud, camera)
     cols, rows, depth = camera.project(cloud)
     facing = np.einsum("pk,pk->p", np.asarray(normals, np.float64), camera.position - cloud) > 0
     depth = np.where(facing, depth, np.inf)

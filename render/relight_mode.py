@@ -22,11 +22,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.camera_model import PinholeCamera
+from core.errors import InputError
 from core.field_store import ReflectanceField
 from processing.environment import EnvironmentLighting, LightingControls
 from processing.panorama import Panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import SampleModels, choose_model, interpolation_loo
+from render.evaluation import held_out_errors
 from render.model_relight import ModelRelightSettings
 from render.relighter import Predictor, RelitImage, best_settings
 
@@ -142,7 +144,8 @@ class ModeChoice:
     ----------
     mode : RelightSettings or ModelRelightSettings
     models : SampleModels, the field's fit
-    loo : dict of str to float, LOO relative RMSE of each predictor compared
+    loo : dict of str to float, relative RMSE of each predictor compared on held-out lights
+        (leave-one-light-out on a field too small to split)
     reason : str, one sentence for the user
     """
 
@@ -159,7 +162,7 @@ def most_accurate_mode(
     models_path: str | os.PathLike[str] | None = None,
     progress: bool = False,
 ) -> ModeChoice:
-    """Choose between per-sample models and interpolation by leave-one-light-out error.
+    """Choose between per-sample models and interpolation by their error on held-out lights.
 
     Parameters
     ----------
@@ -172,23 +175,38 @@ def most_accurate_mode(
     Returns
     -------
     ModeChoice
-        ``MOST_ACCURATE_MODELS`` when the chosen model predicts held-out lights better than
-        barycentric interpolation does, else :func:`render.relighter.best_settings`.
+        ``MOST_ACCURATE_MODELS`` when the model chosen among the fitted ones predicts held-out
+        lights better than barycentric interpolation does, else
+        :func:`render.relighter.best_settings`.
+
+    Notes
+    -----
+    The comparison is honest: both are fitted on every other light and scored on the others
+    (:func:`render.evaluation.held_out_errors`). A leave-one-light-out score of a nonlinear
+    fit that saw every light is biased toward the model (on a real capture it called
+    lambert+ggx 29 % where a refit without the light gave 42 %). A field of fewer than six
+    lights cannot be split; it falls back to the leave-one-light-out scores.
     """
     linear = best_settings(field)
     if models is None:
         models = models_for_field(field, models_path, progress=progress)
     chosen = choose_model(models).chosen
-    interpolated = interpolation_loo(field, linear.interpolation).relative_rmse
-    loo = {chosen: models.fits[chosen].loo.relative_rmse, linear.interpolation: interpolated}
-    if loo[chosen] < interpolated:
+    how = "held-out lights (every other light)"
+    try:
+        errors = held_out_errors(field, [chosen, linear.interpolation])
+    except InputError:
+        how = "held-out lights (leave one out: too few lights to split)"
+        interpolated = interpolation_loo(field, linear.interpolation).relative_rmse
+        errors = {chosen: models.fits[chosen].loo.relative_rmse, linear.interpolation: interpolated}
+    model_error, interpolated = errors[chosen], errors[linear.interpolation]
+    if model_error < interpolated:
         reason = (
-            f"model {chosen} predicts held-out lights with {loo[chosen]:.2%} error, "
+            f"model {chosen} predicts {how} with {model_error:.2%} error, "
             f"{linear.interpolation} interpolation with {interpolated:.2%}"
         )
-        return ModeChoice(MOST_ACCURATE_MODELS, models, loo, reason)
+        return ModeChoice(MOST_ACCURATE_MODELS, models, errors, reason)
     reason = (
-        f"{linear.interpolation} interpolation predicts held-out lights with {interpolated:.2%} "
-        f"error, the best model ({chosen}) with {loo[chosen]:.2%}"
+        f"{linear.interpolation} interpolation predicts {how} with {interpolated:.2%} "
+        f"error, the best model ({chosen}) with {model_error:.2%}"
     )
-    return ModeChoice(linear, models, loo, reason)
+    return ModeChoice(linear, models, errors, reason)

@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import io
 import itertools
+import re
 import shutil
 import signal
 import sys
@@ -150,6 +151,8 @@ def run_case(case: Case, workspace: Workspace, tmp: Path) -> Outcome:
         return Outcome("traceback", status, out.getvalue(), err.getvalue(), "printed")
     missing = [words for words in case.expect if words.format(tmp=tmp) not in text]
     said = out.getvalue().splitlines() + err.getvalue().splitlines()
+    # A progress bar redraws its last state on closing: that is not a message said twice.
+    said = [line for line in said if not re.search(r"\d+%\|", line)]
     repeated = [line for line, n in Counter(said).items() if n > 1 and line.strip()]
     left = [str(path) for path in outputs if path.exists() and case.status != 0]
     left += [str(path) for path in tmp.rglob("*.partial*")]

@@ -13,8 +13,10 @@ from processing.interpolation import interpolation_weights
 from processing.sample_models import evaluate_basis
 from render.light_prediction import (
     BOUND,
+    BOUND_SPACING_DEG,
     PREDICTORS,
     RBF_SIGMAS,
+    bound_factor,
     choose_rbf_sigma,
     leave_one_out_barycentric,
     make_predictor,
@@ -107,7 +109,8 @@ def test_predictions_are_bounded_by_the_data(tmp_path: Path) -> None:
     queries = camera_to_rig(hemisphere_layout(50, "grid"), field.cameras[0])
     for name in ("ptm", "hsh3", "ptm-8bit", "lambert+ggx", "lambert+ggx+residual"):
         predicted = make_predictor(field, name).predict(0, queries)
-        assert predicted.min() >= 0 and predicted.max() <= BOUND * peak + 1e-6, name
+        limit = bound_factor(field.light_directions) * peak
+        assert predicted.min() >= 0 and predicted.max() <= limit * (1 + 1e-6), name
 
 
 def test_the_models_predict_a_simulated_field_of_their_own_kind(tmp_path: Path) -> None:
@@ -149,3 +152,13 @@ def test_leave_one_out_barycentric_rebuilds_the_triangulation_without_the_light(
                                         policy="clamp")  # fmt: skip
         np.testing.assert_allclose(held_out[j], weights.apply(values[others])[0])
     assert not np.allclose(held_out, values)  # the light itself never helps predict it
+
+
+def test_the_bound_loosens_as_the_lights_grow_sparse() -> None:
+    dense = hemisphere_layout(400, "fibonacci")  # about 7 degrees apart
+    sparse = hemisphere_layout(8, "fibonacci")  # about 50 degrees apart
+    assert bound_factor(dense) == BOUND
+    spacing = 50.0
+    assert bound_factor(sparse) == pytest.approx(
+        BOUND * (spacing / BOUND_SPACING_DEG) ** 2, rel=0.3
+    )

@@ -25,7 +25,7 @@ def test_a_glossy_field_is_relit_through_its_models(tmp_path: Path, courtyard_pa
     field = ReflectanceField.open(path)
     choice = most_accurate_mode(field)
     assert choice.mode == MOST_ACCURATE_MODELS and choice.models is not None
-    assert choice.loo["lambert+ggx"] < 0.01 < choice.loo["barycentric"]
+    assert choice.loo["lambert+ggx"] < 0.05 < choice.loo["barycentric"]
     assert "lambert+ggx" in choice.reason and default_models_path(path).exists()
     engine = open_relighter(field, choice.mode)  # reads the saved fit
     assert isinstance(engine, ModelRelighter)
