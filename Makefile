@@ -1,5 +1,6 @@
 # `make test` and `make demo` build .venv from pyproject.toml when it is missing or older than it
-# (with the `reference` extra: CI runs the Mitsuba 3 comparison).
+# (with the `reference` extra: CI runs the Mitsuba 3 comparison; `learned`: PyTorch for the
+# learned rung's training).
 PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
@@ -10,7 +11,7 @@ BIN := $(VENV)/bin
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,reference]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,reference,learned]'
 	touch $(STAMP)
 
 lint: $(STAMP)

@@ -224,12 +224,12 @@ def _relight_field(
     if suffix not in IMAGE_SUFFIXES:
         if args.sequence == "turntable" and field.sample_kind == "pixels":
             raise RigError(f"{args.field} holds one fixed view: use --sequence environment")
-    mode, models = _relight_mode(args, field)
+    mode, models, comparison = _relight_mode(args, field)
     controls = mode.lighting_controls(
         yaw_deg=args.yaw, exposure=args.exposure, modulation=modulation
     )
     relit = adjust_environment(panorama, controls)
-    for warning in _relight_warnings(field, camera, relit, mode, models):
+    for warning in _relight_warnings(field, camera, relit, mode, models, comparison):
         print(warning)
     relighter = open_relighter(field, mode, models)
     lighting = {"yaw_deg": args.yaw, "exposure": args.exposure, "modulation": modulation}
@@ -252,12 +252,15 @@ def _relight_field(
     return 0
 
 
-def _relight_warnings(field: Any, camera: Any, relit: Any, mode: Any, models: Any) -> list[Any]:
+def _relight_warnings(
+    field: Any, camera: Any, relit: Any, mode: Any, models: Any, comparison: Any
+) -> list[Any]:
     """What to expect of this relighting (``render.guards.relight_warnings``).
 
     The guards see the panorama as relit (yaw and exposure applied). Interpolation modes
-    without a fit in hand read the fit saved beside the field, if any: its lobe and held-out
-    error inform the ghosting, sun and noise guards.
+    without a fit in hand read the fit saved beside the field, if any: its lobe and
+    leave-one-out error inform the ghosting, sun and noise guards. The held-out comparison
+    of the default choice, when it was made, decides whether they advise the models.
     """
     from processing.sample_model_store import default_models_path, read_sample_models
     from render.guards import relight_warnings
@@ -266,11 +269,15 @@ def _relight_warnings(field: Any, camera: Any, relit: Any, mode: Any, models: An
     if not mode.uses_models and models is None and saved.exists():
         with contextlib.suppress(RigError):
             models = read_sample_models(saved, field)
-    return relight_warnings(field, camera, relit.rgb, mode, models)
+    return relight_warnings(field, camera, relit.rgb, mode, models, comparison)
 
 
-def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any]:
-    """The relighting mode the flags ask for, and the field's models when it needs them."""
+def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any, Any]:
+    """The relighting mode the flags ask for, and what informs it.
+
+    Returns the mode, the field's models when it needs them, and the held-out comparison
+    when the mode was chosen by it (else None).
+    """
     from dataclasses import replace
 
     from processing.sample_model_store import models_for_field
@@ -280,27 +287,28 @@ def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any]:
 
     k = 64 if args.k is None else args.k
     if args.paper:
-        return RelightSettings.paper_configuration(k=k), None
+        return RelightSettings.paper_configuration(k=k), None, None
     if args.scheme == "model":
         lighting: ModelLightingMode = "grid" if args.k is None else "sampled"
         mode = ModelRelightSettings(
             model=args.model, lighting=lighting, k=k, sampler=args.sampler, grid_height=args.grid
         )
-        return mode, models_for_field(field, args.models, progress=True)
+        return mode, models_for_field(field, args.models, progress=True), None
     flags = (args.scheme, args.interp, args.view_interp, args.k, args.m, args.n)
     if all(flag is None for flag in flags):
         choice = most_accurate_mode(field, models_path=args.models, progress=True)
         print(f"relighting mode: {choice.reason}")
         if choice.mode == MOST_ACCURATE_MODELS:
-            return replace(MOST_ACCURATE_MODELS, grid_height=args.grid), choice.models
-        return choice.mode, choice.models  # the fit still informs the warnings
+            mode = replace(MOST_ACCURATE_MODELS, grid_height=args.grid)
+            return mode, choice.models, choice.comparison
+        return choice.mode, choice.models, choice.comparison  # they inform the warnings
     settings = RelightSettings(args.scheme or "sampled", k=k, sampler=args.sampler,
                                m=args.m or 3, n=args.n or 3)  # fmt: skip
     if args.interp:
         settings = replace(settings, interpolation=args.interp)
     if args.view_interp:
         settings = replace(settings, view_interpolation=args.view_interp)
-    return settings, None
+    return settings, None, None
 
 
 def _write_pyvista_picture(args: argparse.Namespace, field: Any, camera: Any, image: Any) -> None:

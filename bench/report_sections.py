@@ -9,6 +9,7 @@ stability study's sections, whose tables their modules format (:mod:`bench.advis
 from __future__ import annotations
 
 from bench.advisor import format_advisor
+from bench.guard_advice import format_advice
 from bench.held_out import format_held_out
 from bench.report_markdown import markdown_table, ratio
 from bench.report_studies import study_sections
@@ -183,4 +184,11 @@ def report_sections(results: SuiteResults, front: list[str]) -> list[str]:
     held_out = results.get("held_out")
     if held_out:
         lines += [format_held_out(held_out).rstrip("\n"), "", "![held-out PSNR](held_out.png)", ""]
+    if results.get("guard_advice"):
+        lines += [
+            "## Does the guards' advice help? (held-out lights)",
+            "",
+            format_advice(results["guard_advice"]).rstrip("\n"),
+            "",
+        ]
     return lines + _section_stability(results)

@@ -39,7 +39,15 @@ import numba
 import numpy as np
 
 from bench.advisor import validate_advisor
-from bench.held_out import run_held_out, world_fields, world_rti_captures
+from bench.guard_advice import AdviceRecord
+from bench.guard_advice import run as run_guard_advice
+from bench.held_out import (
+    HeldOutRecord,
+    own_family_fields,
+    run_held_out,
+    world_fields,
+    world_rti_captures,
+)
 from bench.report import write_report
 from bench.stability import run_stability
 from bench.suite_fields import (
@@ -159,7 +167,8 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
                 )  # fmt: skip
     product = bench_product(config, chain_run, fields_dir)
     stability = run_stability(out / "stability", config.quick_methods)
-    held_out = []
+    held_out: list[HeldOutRecord] = []
+    guard_advice: list[AdviceRecord] = []
     if config.held_out_methods:
         quick = config.name != "full"
         worlds = world_fields(fields_dir, config.held_out_worlds, config.world_field)
@@ -168,6 +177,10 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
             fields_dir, quick=quick, worlds=worlds, rti_worlds=domes,
             methods=config.held_out_methods,
         )  # fmt: skip
+        guard_advice = run_guard_advice(
+            out / "guard_advice", quick=quick, rti_worlds=domes, worlds=worlds,
+            own_family=own_family_fields(fields_dir, quick=quick),
+        )["records"]  # fmt: skip
     at_end: MachineRecord = {
         **at_start,
         "load_average_end": list(os.getloadavg()),
@@ -192,6 +205,7 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
         "product": product,
         "stability": stability,
         "held_out": held_out,
+        "guard_advice": guard_advice,
         "wall_s": time.perf_counter() - started,
     }
 

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, Literal, NotRequired, TypedDict, TypeGuard
 
 if TYPE_CHECKING:
+    from bench.guard_advice import AdviceRecord
     from bench.held_out import HeldOutRecord
 
 __all__ = [
@@ -268,4 +269,5 @@ class SuiteResults(TypedDict):
     product: ProductRecord
     stability: StabilityRecord
     held_out: NotRequired[list[HeldOutRecord]]
+    guard_advice: NotRequired[list[AdviceRecord]]
     wall_s: float

@@ -46,7 +46,7 @@ from core.errors import InputError, RigError
 from core.field_store import ReflectanceField
 from core.image_io import TransferChoice
 from core.point_spacing import point_spacing
-from processing.image_quality import ImageQuality, display_scale, image_quality
+from processing.image_quality import ImageQuality, display_8bit, display_scale, image_quality
 from processing.rti import import_rti
 from render.light_prediction import PREDICTORS, make_predictor
 from render.splat import plan_splats, splat
@@ -55,6 +55,7 @@ __all__ = [
     "CHOICE_SAMPLES",
     "SPLITS",
     "Evaluation",
+    "HeldOutError",
     "MethodResult",
     "evaluate",
     "held_out_errors",
@@ -120,6 +121,24 @@ def split_lights(field: ReflectanceField, how: str) -> tuple[NDArray[np.int64], 
 CHOICE_SAMPLES = 3000
 
 
+@dataclass(frozen=True)
+class HeldOutError:
+    """A method's error on held-out lights, in linear light and as displayed.
+
+    Attributes
+    ----------
+    relative_rmse : float, sqrt(sum (p - r)^2 / sum r^2) in linear light
+    psnr : float, dB, of the 8-bit sRGB display values (the display range as the module says;
+        inf when exact)
+    """
+
+    relative_rmse: float
+    psnr: float
+
+    def __str__(self) -> str:
+        return f"{self.relative_rmse:.2%} ({self.psnr:.1f} dB)"
+
+
 def held_out_errors(
     field: ReflectanceField,
     methods: Sequence[str],
@@ -127,13 +146,15 @@ def held_out_errors(
     split: str = "every-other",
     samples: int = CHOICE_SAMPLES,
     seed: int = 0,
-) -> dict[str, float]:
-    """Relative RMSE of each method on held-out lights of ``field`` itself, for choosing.
+) -> dict[str, HeldOutError]:
+    """The error of each method on held-out lights of ``field`` itself, for choosing.
 
-    Each method is fitted on the split's fit lights alone and predicts the others; the error is
-    sqrt(sum (p - r)^2 / sum r^2) over every visible (camera, sample, test light), in linear
-    light. Unlike a leave-one-light-out score of a fit that saw every light, no light a method
-    is scored on reached its fit. A field of points is judged on ``samples`` random samples.
+    Each method is fitted on the split's fit lights alone and predicts the others; the errors
+    are taken over every visible (camera, sample, test light): the relative RMSE in linear
+    light (bright values weigh most) and the PSNR of the 8-bit sRGB values (dark regions
+    count as the eye sees them). Unlike a leave-one-light-out score of a fit that saw every
+    light, no light a method is scored on reached its fit. A field of points is judged on
+    ``samples`` random samples.
 
     Raises
     ------
@@ -147,17 +168,25 @@ def held_out_errors(
         keep = np.sort(chosen)
     fit = field.subset(lights=fit_index, samples=keep)
     test = field.subset(lights=test_index, samples=keep)
-    errors: dict[str, float] = {}
+    truths = [test.camera_slab(s)[:, test.visibility[s]] for s in range(test.shape[0])]
+    rti = field.provenance.get("source") == "rti"
+    scale = 1.0 if rti else display_scale(np.concatenate([t.reshape(-1, 3) for t in truths]))
+    shown = [display_8bit(t, scale).astype(np.float64) for t in truths]
+    energy = sum(float(np.sum(t.astype(np.float64) ** 2)) for t in truths)
+    count = sum(t.size for t in truths)
+    errors: dict[str, HeldOutError] = {}
     for name in methods:
         predictor = make_predictor(fit, name)
-        squared = energy = 0.0
-        for s in range(test.shape[0]):
-            seen = test.visibility[s]
-            truth = test.camera_slab(s)[:, seen].astype(np.float64)
-            predicted = predictor.predict(s, test.light_directions)[:, seen]
+        squared = displayed = 0.0
+        for s, (truth, seen) in enumerate(zip(truths, shown, strict=True)):
+            predicted = predictor.predict(s, test.light_directions)[:, test.visibility[s]]
             squared += float(np.sum((predicted - truth) ** 2))
-            energy += float(np.sum(truth**2))
-        errors[name] = math.sqrt(squared / energy) if energy > 0 else 0.0
+            displayed += float(np.sum((display_8bit(predicted, scale) - seen) ** 2))
+        mse = displayed / count if count else 0.0
+        errors[name] = HeldOutError(
+            math.sqrt(squared / energy) if energy > 0 else 0.0,
+            10.0 * math.log10(255.0**2 / mse) if mse > 0 else math.inf,
+        )
     return errors
 
 

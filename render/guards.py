@@ -1,7 +1,12 @@
 """Plain-language warnings for the cases where relighting is known to go wrong.
 
 Each guard looks at the inputs only (the field's light and camera layout, its fitted lobes, the
-view, the panorama) and says what to expect and what fixes it. The thresholds come from the
+view, the panorama) and says what to expect and what fixes it. Where the fix might be to relight
+through the per-sample models, the advice follows the field's own held-out comparison
+(:class:`render.relight_mode.HeldOutComparison`): the models are advised only where they predicted
+lights they never saw better than interpolation did, and the figures are quoted. On a world no
+model contains, the old unconditional advice made results worse where it fired (``python -m
+bench.guard_advice``, docs/evaluation.md). The thresholds come from the
 accuracy study (docs/models.md, ``python -m bench.relight``): interpolating a GGX lobe of
 roughness 0.2 (full width about 30 degrees in light direction) from 30 lights (spacing about
 26 degrees) misses it by 24-41 %; from 400 lights (about 7 degrees) by 2 % under light from
@@ -24,7 +29,7 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from processing.interpolation import mean_spacing_deg
 from processing.sample_models import ParametricFit, SampleModels, choose_model
-from render.relight_mode import RelightMode
+from render.relight_mode import HeldOutComparison, RelightMode
 
 __all__ = [
     "RelightWarning",
@@ -36,6 +41,7 @@ __all__ = [
     "ghosting_warning",
     "grazing_view_warning",
     "lobe_width_deg",
+    "model_advice",
     "noisy_capture_warning",
     "relight_warnings",
     "saturated_capture_warning",
@@ -108,13 +114,37 @@ def lobe_width_deg(alpha: float) -> float:
     return 4.0 * math.degrees(math.acos(math.sqrt(cos2)))
 
 
-def ghosting_warning(light_directions: NDArray[np.floating], alpha: float) -> RelightWarning | None:
+def model_advice(comparison: HeldOutComparison | None, fix: str) -> str:
+    """The advice of a guard that the per-sample models might cure, as the field measured it.
+
+    Parameters
+    ----------
+    comparison : HeldOutComparison or None, the field's models against interpolation on
+        held-out lights (None: not measured)
+    fix : str, the cure that does not depend on the models (a denser capture, say)
+    """
+    if comparison is None:
+        return (
+            f"{fix}; the per-sample models (--scheme model) may do better: rig evaluate FIELD "
+            "--split every-other measures whether they do"
+        )
+    if comparison.models_win:
+        return f"relight through the per-sample models (--scheme model; {comparison}), or {fix}"
+    return f"the per-sample models do not help here ({comparison}): {fix}"
+
+
+def ghosting_warning(
+    light_directions: NDArray[np.floating],
+    alpha: float,
+    comparison: HeldOutComparison | None = None,
+) -> RelightWarning | None:
     """Warn when interpolating between the measured lights cannot follow a lobe of ``alpha``.
 
     Parameters
     ----------
     light_directions : ndarray, shape (T, 3), the measured lights
     alpha : float, the typical fitted GGX roughness of the object's samples
+    comparison : HeldOutComparison, optional, whether the models beat interpolation
     """
     spacing = mean_spacing_deg(light_directions)
     width = lobe_width_deg(alpha)
@@ -125,8 +155,8 @@ def ghosting_warning(light_directions: NDArray[np.floating], alpha: float) -> Re
         "ghosting",
         f"specular lobe (about {width:.0f} deg wide, GGX roughness {alpha:.2f}) narrower than "
         f"twice the light spacing ({spacing:.0f} deg): interpolating the measured lights will "
-        f"ghost the highlights; relight through the per-sample models (--scheme model), or "
-        f"capture about {needed} light positions",
+        f"ghost the highlights; "
+        + model_advice(comparison, f"capture about {needed} light positions"),
     )
 
 
@@ -143,12 +173,15 @@ def fitted_lobe_alpha(models: SampleModels) -> float | None:
 
 
 def view_warning(
-    camera_directions: NDArray[np.floating], camera: PinholeCamera
+    camera_directions: NDArray[np.floating],
+    camera: PinholeCamera,
+    comparison: HeldOutComparison | None = None,
 ) -> RelightWarning | None:
     """Warn when the view is farther from every captured camera than their spacing.
 
     Blending captured views then extrapolates (a view below the lowest ring, say); the
-    per-sample models evaluate the fitted BRDF at the view instead.
+    per-sample models evaluate the fitted BRDF at the view instead, where they generalise
+    (``comparison``).
     """
     directions = np.asarray(camera_directions, dtype=np.float64)
     if len(directions) < 2:
@@ -160,8 +193,8 @@ def view_warning(
     return RelightWarning(
         "view-outside",
         f"the view is {nearest:.0f} deg from the nearest captured camera (cameras are "
-        f"{spacing:.0f} deg apart): blending the captured views extrapolates here; relight "
-        "through the per-sample models (--scheme model) or capture cameras nearer this view",
+        f"{spacing:.0f} deg apart): blending the captured views extrapolates here; "
+        + model_advice(comparison, "capture cameras nearer this view"),
     )
 
 
@@ -232,6 +265,7 @@ def sun_warning(
     interpolation: str = "barycentric",
     camera_directions: NDArray[np.floating] | None = None,
     camera: PinholeCamera | None = None,
+    comparison: HeldOutComparison | None = None,
 ) -> RelightWarning | None:
     """Warn when a sun dominates the panorama and interpolation cannot place its light.
 
@@ -256,6 +290,8 @@ def sun_warning(
         nearest lights whatever their spacing)
     camera_directions : ndarray, shape (S, 3), optional; with ``camera``, checks the view
     camera : PinholeCamera, optional, the wanted view
+    comparison : HeldOutComparison, optional, whether the models beat interpolation (a
+        held-out light is a sun: the comparison measures this very case)
     """
     share = sun_share(rgb)
     if share < SUN_SHARE:
@@ -270,15 +306,17 @@ def sun_warning(
         return RelightWarning(
             "sun-sparse-lights",
             f"{intro} and the measured lights are {spacing:.0f} deg apart: interpolating them "
-            f"blurs its shading and shadows (expect 10 % error or more); relight through the "
-            f"per-sample models (--scheme model), or capture about {needed} light positions",
+            f"blurs its shading and shadows (expect 10 % error or more); "
+            + model_advice(comparison, f"capture about {needed} light positions"),
         )
     width = lobe_width_deg(alpha)
     reasons = []
+    fix = "capture more light positions"
     if interpolation == "paper":
         reasons.append("the paper's interpolation blends the 3 nearest lights at any spacing")
     elif spacing > SUN_GHOST_SPACING * width:
         needed = math.ceil(count * (spacing / (SUN_GHOST_SPACING * width)) ** 2)
+        fix = f"capture about {needed} light positions"
         reasons.append(
             f"the lights are {spacing:.0f} deg apart against a {width:.0f} deg lobe "
             f"(about {needed} light positions would follow it)"
@@ -289,17 +327,20 @@ def sun_warning(
         )
         if nearest > SUN_VIEW_OFFSET * width:
             reasons.append(f"the view is {nearest:.1f} deg from the nearest captured camera")
+            fix += " and view from a captured camera"
     if not reasons:
         return None
     return RelightWarning(
         "sun-ghosting",
         f"{intro}, and {'; '.join(reasons)}: its highlight will show as several ghosted copies "
-        "(expect 10-45 % error); relight through the per-sample models (--scheme model)",
+        "(expect 10-45 % error); " + model_advice(comparison, fix),
     )
 
 
 def grazing_view_warning(
-    camera_directions: NDArray[np.floating], camera: PinholeCamera
+    camera_directions: NDArray[np.floating],
+    camera: PinholeCamera,
+    comparison: HeldOutComparison | None = None,
 ) -> RelightWarning | None:
     """Warn when the view skims the horizon below every captured camera.
 
@@ -314,6 +355,7 @@ def grazing_view_warning(
     ----------
     camera_directions : ndarray, shape (S, 3), the captured cameras
     camera : PinholeCamera, the wanted view
+    comparison : HeldOutComparison, optional, whether the models beat interpolation
     """
     directions = np.asarray(camera_directions, dtype=np.float64)
     # From under the object (past 180 - 80 degrees) is no longer grazing: view_warning's case.
@@ -328,8 +370,8 @@ def grazing_view_warning(
         "grazing-view",
         f"the view is {90.0 - camera.inclination_deg:.0f} deg above the horizon, below the "
         f"lowest captured camera ({90.0 - lowest:.0f} deg): the object is seen at grazing "
-        "angles no camera measured, expect about twice the error of a higher view; relight "
-        "through the per-sample models (--scheme model) or capture a lower ring of cameras",
+        "angles no camera measured, expect about twice the error of a higher view; "
+        + model_advice(comparison, "capture a lower ring of cameras"),
     )
 
 
@@ -390,14 +432,20 @@ def saturated_capture_warning(
     )
 
 
-def noisy_capture_warning(models: SampleModels) -> RelightWarning | None:
-    """Warn when even the best model misses held-out lights by much: a noisy capture.
+def noisy_capture_warning(
+    models: SampleModels, comparison: HeldOutComparison | None = None
+) -> RelightWarning | None:
+    """Warn when even the best model misses left-out lights by much.
 
+    The cause is noise, clipping, or a material beyond the models.
     Threshold :data:`NOISY_LOO` (20 %) on the chosen model's leave-one-light-out error,
     measured by ``python -m bench.stability``: clean simulated fields 0-11 % (the torus's
     cast shadows), well exposed 1-5 %; brightest values at 0.2 % of the well 27 % (diffuse
-    sphere; best interpolation 2.1 -> 11 % under a sunny sky) and 57 % (glossy). The models
-    average the noise over every observation (1.3-5 %), interpolation passes it through.
+    sphere; best interpolation 2.1 -> 11 % under a sunny sky) and 57 % (glossy). There the
+    models average the noise over every observation (1.3-5 %) and interpolation passes it
+    through; but the same error comes from a noise-free material the models do not contain
+    (a glossy path-traced world), where the models do worse than interpolation. So the
+    advice follows ``comparison``, the field's own held-out measurement.
     """
     choice = choose_model(models)
     loo = models.fits[choice.chosen].loo.relative_rmse
@@ -405,10 +453,9 @@ def noisy_capture_warning(models: SampleModels) -> RelightWarning | None:
         return None
     return RelightWarning(
         "noisy-capture",
-        f"the best per-sample model ({choice.chosen}) misses held-out lights by {loo:.0%}: "
-        "the capture is noisy (or clipped), and interpolating it carries the noise into the "
-        "relit image; relight through the per-sample models (--scheme model), which average "
-        "it, or capture longer exposures",
+        f"the best per-sample model ({choice.chosen}) misses left-out lights by {loo:.0%}: "
+        "the capture is noisy or clipped, or its material is beyond the models; "
+        + model_advice(comparison, "capture longer exposures (or an exposure bracket)"),
     )
 
 
@@ -464,6 +511,7 @@ def relight_warnings(
     rgb: NDArray[np.floating],
     mode: RelightMode,
     models: SampleModels | None,
+    comparison: HeldOutComparison | None = None,
 ) -> list[RelightWarning]:
     """Every warning that applies to relighting ``field`` under ``rgb`` at ``camera``.
 
@@ -479,6 +527,9 @@ def relight_warnings(
     rgb : ndarray, shape (H, 2H, 3), the panorama as relit (after yaw and exposure)
     mode : RelightMode
     models : SampleModels or None, the field's fit (its lobe and LOO error inform the guards)
+    comparison : HeldOutComparison, optional, the models against interpolation on held-out
+        lights (:class:`render.relight_mode.ModeChoice`): the advice to relight through the
+        models is given only where they won
     """
     found = [clipped_panorama_warning(rgb), empty_camera_warning(field)]
     nearest = np.argsort(angle_between(field.camera_directions, camera.direction[None, :]))
@@ -488,13 +539,13 @@ def relight_warnings(
         points = field.sample_kind == "points"
         if points:
             found += [
-                view_warning(field.camera_directions, camera),
-                grazing_view_warning(field.camera_directions, camera),
+                view_warning(field.camera_directions, camera, comparison),
+                grazing_view_warning(field.camera_directions, camera, comparison),
             ]
         if models is not None:
-            found.append(noisy_capture_warning(models))
+            found.append(noisy_capture_warning(models, comparison))
         if alpha is not None:
-            found.append(ghosting_warning(field.light_directions, alpha))
+            found.append(ghosting_warning(field.light_directions, alpha, comparison))
         # A pixel field has one fixed view: nothing to interpolate between cameras.
         views = (field.camera_directions, camera) if points else (None, None)
         found.append(
@@ -505,6 +556,7 @@ def relight_warnings(
                 interpolation=mode.predictors()[0][1],
                 camera_directions=views[0],
                 camera=views[1],
+                comparison=comparison,
             )
         )
     return [w for w in found if w is not None]

@@ -29,6 +29,10 @@ method                      what predicts the unmeasured light
                             share of the error): where the model explains a sample its
                             residual helps, where it does not (cast shadows, grazing light)
                             plain interpolation is kept
+``learned``,                a code per sample and one small decoder shared by the object,
+``learned+residual``        trained on the capture (:mod:`processing.learned_rti`, the class
+                            of neural RTI; about a minute of training on 2 cores), alone and
+                            with the ``barycentric`` residual
 ==========================  ===============================================================
 
 Fitted predictions are bounded by what the data allow: at least 0 and at most
@@ -49,12 +53,14 @@ lights are the rig's upper hemisphere, where the hemispherical harmonics are def
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from dataclasses import field as default
 from typing import Literal, Protocol, get_args
 
 import numpy as np
 from numpy.typing import NDArray
+from tqdm import tqdm
 
 from core.camera_model import rig_to_camera
 from core.colour import linear_to_srgb, srgb_to_linear
@@ -62,6 +68,7 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
 from processing.interpolation import InterpolationMethod, interpolation_weights, mean_spacing_deg
+from processing.learned_rti import LearnedRTI, TrainingSettings, train_learned_rti
 from processing.sample_model_store import models_for_field
 from processing.sample_models import (
     BASIS_MODELS,
@@ -103,6 +110,8 @@ PredictorName = Literal[
     "lambert+residual",
     "lambert+ggx+residual",
     "adaptive",
+    "learned",
+    "learned+residual",
 ]
 #: Every method, the baselines first.
 PREDICTORS: tuple[PredictorName, ...] = get_args(PredictorName)
@@ -379,6 +388,61 @@ class _Adaptive:
         return _bounded(self.field, camera, share * helped + (1.0 - share) * alone)
 
 
+#: Trained networks by field (while it lives), so ``learned`` and ``learned+residual`` of one
+#: field train once.
+_TrainedKey = tuple[int, TrainingSettings]
+_TRAINED: weakref.WeakKeyDictionary[ReflectanceField, dict[_TrainedKey, LearnedRTI]]
+_TRAINED = weakref.WeakKeyDictionary()
+
+
+@dataclass
+class _Learned:
+    """The learned model of a field.
+
+    One network for a field of points (lights in the rig frame, every camera's samples), one
+    per camera for a field of pixels (lights in its frame).
+    """
+
+    field: ReflectanceField
+    name: str
+    settings: TrainingSettings
+    progress: bool
+    _codes: dict[int, NDArray[np.float32]] = default(default_factory=dict)
+
+    def _train(self, cameras: list[int], lights: NDArray[np.float64]) -> LearnedRTI:
+        parts = [self.field.camera_slab(s)[:, self.field.visibility[s]] for s in cameras]
+        values = np.concatenate(parts, axis=1)
+        if values.shape[1] == 0:
+            raise InputError(f"{self.field.path}: no camera sees any sample; nothing to learn")
+        bar = tqdm(
+            total=self.settings.steps, desc="training", unit="step", disable=not self.progress
+        )
+        try:
+            return train_learned_rti(values, lights, self.settings, lambda *_: bar.update())
+        finally:
+            bar.close()
+
+    def model(self, camera: int) -> LearnedRTI:
+        """The model that predicts ``camera``'s view (trained on first use)."""
+        key = (camera if self.field.sample_kind == "pixels" else -1, self.settings)
+        trained = _TRAINED.setdefault(self.field, {})
+        if key not in trained:
+            cameras = [camera] if key[0] >= 0 else list(range(self.field.shape[0]))
+            lights = _basis_frame_directions(self.field, camera, self.field.light_directions)
+            trained[key] = self._train(cameras, lights)
+        return trained[key]
+
+    def predict(self, camera: int, directions: NDArray[np.floating]) -> NDArray[np.float32]:
+        model = self.model(camera)
+        seen = self.field.visibility[camera]
+        if camera not in self._codes:
+            self._codes[camera] = model.encode(self.field.camera_slab(camera)[:, seen])
+        frame = _basis_frame_directions(self.field, camera, directions)
+        out = np.zeros((len(frame), self.field.shape[2], 3), dtype=np.float32)
+        out[:, seen] = model.decode(self._codes[camera], frame)
+        return _bounded(self.field, camera, out)
+
+
 def _fitted_models(
     field: ReflectanceField, names: list[str], models: SampleModels | None, progress: bool
 ) -> SampleModels:
@@ -396,6 +460,7 @@ def make_predictor(
     models: SampleModels | None = None,
     scale: float = 1.0,
     sigma: float | None = None,
+    learned: TrainingSettings | None = None,
     progress: bool = False,
 ) -> LightPredictor:
     """The predictor ``name`` (a :data:`PREDICTORS` entry) of ``field``.
@@ -408,6 +473,7 @@ def make_predictor(
         beside a store)
     scale : float, linear value that 8-bit white stands for (the ``-8bit`` bases)
     sigma : float, optional, the ``rbf`` width (default: chosen by leave-one-light-out)
+    learned : TrainingSettings, optional, how the ``learned`` model trains (default settings)
     progress : bool, progress bars while fitting
 
     Raises
@@ -426,6 +492,9 @@ def make_predictor(
             else sigma
         )
         return _Interpolating(field, name, chosen)
+    if name.removesuffix("+residual") == "learned":
+        network = _Learned(field, "learned", learned or TrainingSettings(), progress)
+        return _Residual(field, name, network) if name.endswith("+residual") else network
     basis = name.removesuffix("-8bit")
     if basis in BASIS_MODELS:
         return _Basis(field, name, basis, name.endswith("-8bit"), scale)

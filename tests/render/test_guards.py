@@ -10,6 +10,7 @@ from core.directions import hemisphere_layout
 from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.panorama import read_panorama
 from processing.sample_models import fit_sample_models
+from render.evaluation import HeldOutError
 from render.guards import (
     SUN_SHARE,
     clipped_panorama_warning,
@@ -19,10 +20,13 @@ from render.guards import (
     ghosting_warning,
     grazing_view_warning,
     lobe_width_deg,
+    model_advice,
+    noisy_capture_warning,
     sun_share,
     sun_warning,
     view_warning,
 )
+from render.relight_mode import HeldOutComparison
 from sim.field import field_cameras, simulate_field
 from sim.scenes import build_scene
 from sim.skies import ldr_photo, procedural_sky
@@ -47,6 +51,43 @@ def test_ghosting_fires_where_interpolation_fails(lights: int, fires: bool) -> N
     if warning is not None:
         needed = int(warning.message.split("capture about ")[1].split()[0])
         assert needed > lights and "--scheme model" in warning.message
+
+
+def test_the_advice_to_use_the_models_follows_the_held_out_comparison() -> None:
+    fix = "capture about 90 light positions"
+    unmeasured = model_advice(None, fix)
+    assert unmeasured.startswith(fix) and "rig evaluate FIELD --split every-other" in unmeasured
+    good, bad = HeldOutError(0.031, 38.0), HeldOutError(0.12, 30.0)
+    win = HeldOutComparison("lambert+ggx", good, "barycentric", bad, "held-out lights")
+    advice = model_advice(win, fix)
+    assert advice.startswith("relight through the per-sample models (--scheme model")
+    assert "lambert+ggx errs 3.10% (38.0 dB) and barycentric interpolation 12.00%" in advice
+    # Better in linear light but worse as displayed (the dark regions): not a win.
+    darker = HeldOutError(0.031, 29.0)
+    assert not HeldOutComparison("lambert", darker, "barycentric", bad, "held-out").models_win
+    lose = HeldOutComparison("lambert+ggx", bad, "barycentric", good, "held-out lights")
+    advice = model_advice(lose, fix)
+    assert advice.startswith("the per-sample models do not help here") and "--scheme" not in advice
+    assert advice.endswith(fix)
+    # Each guard whose cure may be the models passes the comparison through.
+    ghost = ghosting_warning(hemisphere_layout(30), 0.2, lose)
+    assert ghost is not None and "do not help here" in ghost.message
+
+
+def test_noise_advice_follows_the_comparison(tmp_path: Path) -> None:
+    path = tmp_path / "noisy.zarr"
+    simulate_field(path, "diffuse-sphere", lights=12, cameras=field_cameras(4, width=24,
+                   height=24), points=300)  # fmt: skip
+    field = ReflectanceField.open(path)
+    noisy = field.load() * np.random.default_rng(0).uniform(0.2, 1.8, (*field.shape, 3))
+    from bench.stability import in_memory
+
+    models = fit_sample_models(in_memory(field, noisy.astype(np.float32)))
+    worse, better = HeldOutError(0.5, 20.0), HeldOutError(0.4, 22.0)
+    lose = HeldOutComparison("lambert", worse, "barycentric", better, "held-out lights")
+    warning = noisy_capture_warning(models, lose)
+    assert warning is not None and "noisy or clipped, or its material is beyond" in warning.message
+    assert "do not help here" in warning.message and "longer exposures" in warning.message
 
 
 def test_the_fitted_lobe_is_found_only_on_glossy_objects(tmp_path: Path) -> None:

@@ -10,6 +10,7 @@ from core.directions import hemisphere_layout
 from core.errors import InputError
 from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.interpolation import interpolation_weights
+from processing.learned_rti import TrainingSettings
 from processing.sample_models import evaluate_basis
 from render.light_prediction import (
     BOUND,
@@ -25,6 +26,8 @@ from render.light_prediction import (
 from sim.field import field_cameras, simulate_field
 
 HEIGHT, WIDTH = 4, 6
+#: A few steps of the learned model: these tests check its plumbing, not its accuracy.
+BRIEF = TrainingSettings(steps=10, batch=8, lights_per_step=4)
 
 
 def _pixel_field(path: Path, values_of: object, lights: int = 40) -> ReflectanceField:
@@ -71,8 +74,10 @@ def test_interpolators_reproduce_the_measured_lights(tmp_path: Path) -> None:
     # fit of the data's own kind is exact too.
     for name, expected in (("nearest", slab), ("barycentric", slab), ("ptm", np.maximum(slab, 0)),
                            ("lambert+residual", np.maximum(slab, 0)),
-                           ("adaptive", np.maximum(slab, 0))):  # fmt: skip
-        predicted = make_predictor(field, name).predict(0, field.light_directions)
+                           ("adaptive", np.maximum(slab, 0)),
+                           ("learned+residual", np.maximum(slab, 0))):  # fmt: skip
+        predictor = make_predictor(field, name, learned=BRIEF)
+        predicted = predictor.predict(0, field.light_directions)
         np.testing.assert_allclose(predicted, expected, atol=1e-5, err_msg=name)
 
 
@@ -135,7 +140,7 @@ def test_every_method_has_a_predictor_and_unknown_ones_are_refused(tmp_path: Pat
     field = _pixel_field(tmp_path / "f.zarr", _polynomial("hsh3", seed=2))
     direction = field.light_directions[:1]
     for name in PREDICTORS:
-        predictor = make_predictor(field, name)
+        predictor = make_predictor(field, name, learned=BRIEF)
         assert predictor.name == name
         assert predictor.predict(0, direction).shape == (1, HEIGHT * WIDTH, 3)
     with pytest.raises(InputError, match="unknown method 'splines'"):

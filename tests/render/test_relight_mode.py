@@ -25,7 +25,9 @@ def test_a_glossy_field_is_relit_through_its_models(tmp_path: Path, courtyard_pa
     field = ReflectanceField.open(path)
     choice = most_accurate_mode(field)
     assert choice.mode == MOST_ACCURATE_MODELS and choice.models is not None
-    assert choice.loo["lambert+ggx"] < 0.05 < choice.loo["barycentric"]
+    assert choice.comparison.model == "lambert+ggx"
+    assert choice.comparison.model_error.relative_rmse < 0.05
+    assert choice.comparison.interpolation_error.relative_rmse > 0.05
     assert "lambert+ggx" in choice.reason and default_models_path(path).exists()
     engine = open_relighter(field, choice.mode)  # reads the saved fit
     assert isinstance(engine, ModelRelighter)
@@ -54,7 +56,7 @@ def test_a_field_the_models_cannot_explain_is_interpolated(tmp_path: Path) -> No
     field = ReflectanceField.open(tmp_path / "glow.zarr")
     choice = most_accurate_mode(field)
     assert isinstance(choice.mode, RelightSettings) and choice.mode.scheme == "pixels"
-    assert choice.loo["barycentric"] == pytest.approx(0.0, abs=1e-6)
+    assert choice.comparison.interpolation_error.relative_rmse == pytest.approx(0.0, abs=1e-6)
     assert "interpolation" in choice.reason.split(" predicts")[0]
     assert isinstance(open_relighter(field, choice.mode), Relighter)
 
