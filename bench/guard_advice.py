@@ -19,7 +19,7 @@ fields (materials no model contains), and the simulator (its material is the lam
 model: its figures say nothing about real objects).
 
 ``python -m bench.guard_advice -o DIR [--quick] [--fields DIR]`` writes ``guard_advice.json``
-and ``guard_advice.md``.
+and ``guard_advice.md`` (by default on the data of ``rig bench --quick``).
 """
 
 from __future__ import annotations
@@ -226,21 +226,37 @@ def format_advice(records: Sequence[AdviceRecord]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _spec(text: str) -> tuple[int, int, int, int, int]:
+    values = tuple(int(v) for v in text.split(","))
+    if len(values) != 5:
+        raise argparse.ArgumentTypeError(f"five whole numbers separated by commas, got {text!r}")
+    return values
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m bench.guard_advice -o DIR [--quick] [--fields DIR]``."""
+    """``python -m bench.guard_advice -o DIR [--quick] [--fields DIR] [--world ...]``.
+
+    The defaults are the data of ``rig bench --quick`` (rendered once, kept in ``--fields``).
+    """
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("-o", "--output", type=Path, required=True)
-    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--quick", action="store_true", help="one split of the real capture")
     parser.add_argument("--fields", type=Path, help="where path-traced data are made and kept")
+    parser.add_argument("--rti-world", action="append", help="world of an RTI dome (repeat)")
+    parser.add_argument("--rti-spec", type=_spec, default=(49, 20, 64, 48, 64),
+                        help="fit lights, test lights, width, height, spp")  # fmt: skip
+    parser.add_argument("--world", action="append", help="world of a field of points (repeat)")
+    parser.add_argument("--world-spec", type=_spec, default=(4, 24, 64, 64, 3000),
+                        help="cameras, lights, image side, spp, points")  # fmt: skip
     args = parser.parse_args(argv)
     from bench.held_out import own_family_fields, world_fields, world_rti_captures
-    from bench.suite_methods import FULL, QUICK
 
-    config = QUICK if args.quick else FULL
     fields_dir = args.fields or args.output / "fields"
     fields_dir.mkdir(parents=True, exist_ok=True)
-    rti = world_rti_captures(fields_dir, config.rti_worlds, config.rti_capture, progress=True)
-    worlds = world_fields(fields_dir, config.held_out_worlds, config.world_field, progress=True)
+    rti = world_rti_captures(fields_dir, args.rti_world or ["clearcoat-relief"], args.rti_spec,
+                             progress=True)  # fmt: skip
+    worlds = world_fields(fields_dir, args.world or ["copper-bowl"], args.world_spec,
+                          progress=True)  # fmt: skip
     own = own_family_fields(fields_dir, quick=args.quick)
     results = run(args.output, quick=args.quick, rti_worlds=rti, worlds=worlds, own_family=own)
     print((args.output / "guard_advice.md").read_text(), end="")

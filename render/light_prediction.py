@@ -410,7 +410,16 @@ class _Learned:
     _codes: dict[int, NDArray[np.float32]] = default(default_factory=dict)
 
     def _train(self, cameras: list[int], lights: NDArray[np.float64]) -> LearnedRTI:
-        parts = [self.field.camera_slab(s)[:, self.field.visibility[s]] for s in cameras]
+        # At most the samples training reads, drawn evenly from the cameras: a large field of
+        # points is never gathered whole.
+        rng = np.random.default_rng(self.settings.seed)
+        share = -(-self.settings.max_samples // len(cameras))
+        parts = []
+        for s in cameras:
+            seen = np.flatnonzero(self.field.visibility[s])
+            if seen.size > share:
+                seen = np.sort(rng.choice(seen, size=share, replace=False))
+            parts.append(self.field.camera_slab(s)[:, seen])
         values = np.concatenate(parts, axis=1)
         if values.shape[1] == 0:
             raise InputError(f"{self.field.path}: no camera sees any sample; nothing to learn")
