@@ -12,7 +12,7 @@ the tolerance.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -29,11 +29,26 @@ from processing.panorama import Panorama
 from processing.sample_models import SampleModels
 from render.advisor import Advisor
 from render.relight_mode import open_relighter
+from render.relighter import RelitImage
 
-__all__ = ["advisor_chart", "format_advisor", "validate_advisor"]
+__all__ = ["TrueError", "advisor_chart", "format_advisor", "simulator_error", "validate_advisor"]
 
 #: The tolerance the validation asks for.
 TOLERANCE = 0.02
+
+
+#: The true error of a relit image: (environment name, view name, image) -> relative RMSE
+#: over the samples both it and the truth show.
+TrueError = Callable[[str, str, RelitImage], float]
+
+
+def simulator_error(truths: Mapping[tuple[str, str], Truth]) -> TrueError:
+    """The true error against the simulator's ground truth of each (environment, view)."""
+
+    def error(env: str, view: str, image: RelitImage) -> float:
+        return float(image_errors(image, truths[(env, view)])["sample_relative_rmse"])
+
+    return error
 
 
 def validate_advisor(
@@ -41,7 +56,7 @@ def validate_advisor(
     field: ReflectanceField,
     models: SampleModels,
     views: Mapping[str, PinholeCamera],
-    truths: Mapping[tuple[str, str], Truth],
+    true_error: TrueError,
     panoramas: Mapping[str, Panorama],
     *,
     samples: int,
@@ -51,9 +66,11 @@ def validate_advisor(
 
     Parameters
     ----------
-    scene : str, the simulator scene of ``field``
+    scene : str, the scene (or world) of ``field``
     field : ReflectanceField; models : its fit (the candidates' models are chosen from it)
-    views : view name to camera; truths : (environment, view name) to ground truth
+    views : view name to camera
+    true_error : TrueError, scores a relit view (:func:`simulator_error`, or a path-traced
+        truth's, :mod:`bench.advisor_world`)
     panoramas : environment name to panorama (HDR: the advisor cannot know what clipping
         removed)
     samples : int, samples the advisor predicts on
@@ -77,7 +94,7 @@ def validate_advisor(
             for view, camera in views.items():
                 engine.set_view(camera)
                 image = engine.render()
-                true[view] = image_errors(image, truths[(env, view)])["sample_relative_rmse"]
+                true[view] = true_error(env, view, image)
             rows.append(
                 {
                     "scene": scene,

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from bench.advisor import TOLERANCE, format_advisor
+from bench.advisor import TOLERANCE, format_advisor, validate_advisor
 from bench.relight import between_view
 from core.camera_model import PinholeCamera
 from core.errors import InputError
@@ -35,8 +35,7 @@ from core.sample_data import panorama_path
 from processing.panorama import Panorama, downsample_panorama, panorama_from_array, read_panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import PARAMETRIC_MODELS
-from render.advisor import Advisor
-from render.relight_mode import open_relighter
+from render.relighter import RelitImage
 from sim.world_files import WORLDS, World, load_world
 from sim.world_render import WorldRenderer, render_environment_image
 from sim.world_samples import world_samples
@@ -104,43 +103,17 @@ def validate_world_advisor(
     index = len(field.cameras) // 2
     views = {"captured": field.cameras[index], "between": between_view(field.cameras, index)}
     truths = world_truths(field, panoramas, views, spp=spp)
+
+    def true_error(env: str, view: str, image: RelitImage) -> float:
+        radiance, seen = truths[(env, view)]
+        shown = image.needed & seen
+        difference = image.radiance[shown].astype(np.float64) - radiance[shown]
+        energy = float(np.sum(radiance[shown].astype(np.float64) ** 2))
+        return float(np.sqrt(np.sum(difference**2) / max(energy, 1e-30)))
+
     models = models_for_field(field, models=PARAMETRIC_MODELS, progress=True)
-    advisor = Advisor(field, samples=samples)
-    engines = {c.name: open_relighter(field, c.mode, models) for c in advisor.candidates}
-    s_count, t_count, p_count = field.shape
-    rows: list[dict[str, Any]] = []
-    for env, panorama in panoramas.items():
-        advice = advisor.advise(panorama, tolerance)
-        for prediction in advice.predictions:
-            engine = engines[prediction.candidate.name]
-            engine.set_lighting(panorama)
-            true = {}
-            for view_name, camera in views.items():
-                engine.set_view(camera)
-                image = engine.render()
-                radiance, seen = truths[(env, view_name)]
-                shown = image.needed & seen
-                difference = image.radiance[shown].astype(np.float64) - radiance[shown]
-                energy = float(np.sum(radiance[shown].astype(np.float64) ** 2))
-                true[view_name] = float(np.sqrt(np.sum(difference**2) / max(energy, 1e-30)))
-            rows.append({
-                "scene": name, "S": s_count, "T": t_count, "points": p_count,
-                "environment": env, "candidate": prediction.candidate.name,
-                "chosen": advice.choice is prediction, "tolerance": tolerance,
-                "predicted": prediction.error,
-                "predicted_terms": {"lights": prediction.lights, "views": prediction.views,
-                                    "lighting": prediction.lighting},
-                "true": true,
-            })  # fmt: skip
-        chosen = [r for r in rows[-len(advice.predictions) :] if r["chosen"]]
-        verdict = (
-            f"{chosen[0]['candidate']}: predicted {chosen[0]['predicted']:.2%}, true "
-            f"{max(chosen[0]['true'].values()):.2%}"
-            if chosen
-            else "no choice"
-        )
-        print(f"advisor   {name:15s} S={s_count:<3d} T={t_count:<3d} {env:10s} {verdict}")
-    return rows
+    return validate_advisor(name, field, models, views, true_error, panoramas,
+                            samples=samples, tolerance=tolerance)  # fmt: skip
 
 
 def ratio_summary(rows: Sequence[Mapping[str, Any]], view: str | None = None) -> str:

@@ -38,7 +38,7 @@ import cv2
 import numba
 import numpy as np
 
-from bench.advisor import validate_advisor
+from bench.advisor import simulator_error, validate_advisor
 from bench.guard_advice import AdviceRecord
 from bench.guard_advice import run as run_guard_advice
 from bench.held_out import (
@@ -161,7 +161,8 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
             for spec in config.advisor_fields:
                 chosen = opened[spec]
                 advisor += validate_advisor(
-                    scene, chosen.field, chosen.models, chosen.views, chosen.truths,
+                    scene, chosen.field, chosen.models, chosen.views,
+                    simulator_error(chosen.truths),
                     {name: envs[name].panorama for name in config.advisor_environments},
                     samples=config.advisor_samples,
                 )  # fmt: skip
