@@ -21,7 +21,7 @@ import json
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,17 +31,27 @@ from bench.relight import between_view
 from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.field_store import ReflectanceField
-from core.sample_data import panorama_path
+from core.sample_data import PanoramaName, panorama_path
 from processing.panorama import Panorama, downsample_panorama, panorama_from_array, read_panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import PARAMETRIC_MODELS
 from render.relighter import RelitImage
+from sim.field import field_cameras
+from sim.mitsuba_world import render_world_field
 from sim.world_files import WORLDS, World, load_world
 from sim.world_render import WorldRenderer, render_environment_image
 from sim.world_samples import world_samples
 from sim.world_visibility import sample_view
 
-__all__ = ["PANORAMA_HEIGHT", "RATIO", "main", "ratio_summary", "validate_world_advisor"]
+__all__ = [
+    "PANORAMA_HEIGHT",
+    "RATIO",
+    "main",
+    "ratio_summary",
+    "real_panoramas",
+    "validate_world_advisor",
+    "world_field",
+]
 
 #: Rows of the panorama both the truth and the relighting see (Mitsuba holds 4x4 texels each).
 PANORAMA_HEIGHT = 64
@@ -116,6 +126,31 @@ def validate_world_advisor(
                             samples=samples, tolerance=tolerance)  # fmt: skip
 
 
+def world_field(fields_dir: Path, world: str, spec: tuple[int, int, int, int, int]) -> Path:
+    """Render (once; cached in ``fields_dir``) a world's field; returns the store's path.
+
+    ``spec`` is (cameras, lights, image side, samples per pixel, points); the lights lie on a
+    Fibonacci lattice.
+    """
+    cameras, lights, side, spp, points = spec
+    path = fields_dir / f"advise-world-{world}-{cameras}x{lights}-{side}px-{spp}spp-{points}.zarr"
+    if not path.exists():
+        render_world_field(path, world, lights=lights, points=points, spp=spp, layout="fibonacci",
+                           cameras=field_cameras(cameras, width=side, height=side))  # fmt: skip
+    return path
+
+
+def real_panoramas(names: Sequence[PanoramaName] = ("courtyard", "studio")) -> dict[str, Panorama]:
+    """The bundled real panoramas, reduced to :data:`PANORAMA_HEIGHT` rows."""
+    return {
+        name: panorama_from_array(
+            downsample_panorama(read_panorama(panorama_path(name)).rgb, PANORAMA_HEIGHT),
+            source=name,
+        )
+        for name in names
+    }
+
+
 def ratio_summary(rows: Sequence[Mapping[str, Any]], view: str | None = None) -> str:
     """How often predicted / true lies within :data:`RATIO` (the worse view, or ``view``)."""
     true = np.array([max(r["true"].values()) if view is None else r["true"][view] for r in rows])
@@ -133,16 +168,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("-o", "--output", type=Path, required=True)
     parser.add_argument("--field", type=Path, required=True, help="a path-traced world field")
-    parser.add_argument("--env", action="append", help="bundled panorama (default courtyard)")
+    parser.add_argument("--env", action="append", choices=get_args(PanoramaName),
+                        help="bundled panorama (default courtyard)")  # fmt: skip
     parser.add_argument("--spp", type=int, default=256, help="samples per pixel of the truth")
     parser.add_argument("--samples", type=int, default=3000, help="the advisor's samples")
     args = parser.parse_args(argv)
     start = time.perf_counter()
     field = ReflectanceField.open(args.field)
-    panoramas = {}
-    for env in args.env or ["courtyard"]:
-        rgb = downsample_panorama(read_panorama(panorama_path(env)).rgb, PANORAMA_HEIGHT)
-        panoramas[env] = panorama_from_array(rgb, source=env)
+    panoramas = real_panoramas(args.env or ["courtyard"])
     name = _world_of(field)[0].name
     rows = validate_world_advisor(name, field, panoramas, samples=args.samples, spp=args.spp)
     args.output.mkdir(parents=True, exist_ok=True)

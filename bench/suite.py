@@ -39,6 +39,7 @@ import numba
 import numpy as np
 
 from bench.advisor import simulator_error, validate_advisor
+from bench.advisor_world import real_panoramas, validate_world_advisor, world_field
 from bench.guard_advice import AdviceRecord
 from bench.guard_advice import run as run_guard_advice
 from bench.held_out import (
@@ -78,6 +79,7 @@ from bench.suite_results import (
 )
 from core.atomic import output_problem
 from core.errors import InputError
+from core.field_store import ReflectanceField
 
 __all__ = ["SuiteConfig", "add_arguments", "machine", "main", "run", "run_suite"]
 
@@ -178,6 +180,10 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
             fields_dir, quick=quick, worlds=worlds, rti_worlds=domes,
             methods=config.held_out_methods,
         )  # fmt: skip
+        for world in config.advisor_worlds:
+            store = world_field(fields_dir, world, config.advisor_world_field)
+            advisor += validate_world_advisor(world, ReflectanceField.open(store),
+                                              real_panoramas())  # fmt: skip
         guard_advice = run_guard_advice(
             out / "guard_advice", quick=quick, rti_worlds=domes, worlds=worlds,
             own_family=own_family_fields(fields_dir, quick=quick),

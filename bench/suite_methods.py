@@ -177,6 +177,10 @@ class SuiteConfig:
         pixel, points)
     rti_worlds, rti_capture : the worlds of that study captured as RTI domes: (fit lights,
         test lights, width, height, samples per pixel)
+    advisor_worlds, advisor_world_field : path-traced worlds on which ``rig advise`` and every
+        relighting configuration are scored against a path-traced truth under the real
+        panoramas (:mod:`bench.advisor_world`), and their fields: (cameras, lights, image
+        side, samples per pixel, points)
     """
 
     name: str
@@ -202,6 +206,8 @@ class SuiteConfig:
     world_field: tuple[int, int, int, int, int] = (8, 30, 96, 256, 8000)
     rti_worlds: tuple[str, ...] = ()
     rti_capture: tuple[int, int, int, int, int] = (49, 20, 128, 96, 256)
+    advisor_worlds: tuple[str, ...] = ()
+    advisor_world_field: tuple[int, int, int, int, int] = (30, 30, 64, 64, 3000)
 
 
 def config_record(config: SuiteConfig) -> ConfigRecord:
@@ -239,6 +245,8 @@ def config_record(config: SuiteConfig) -> ConfigRecord:
         "world_field": list(config.world_field),
         "rti_worlds": list(config.rti_worlds),
         "rti_capture": list(config.rti_capture),
+        "advisor_worlds": list(config.advisor_worlds),
+        "advisor_world_field": list(config.advisor_world_field),
     }
 
 
@@ -280,6 +288,9 @@ FULL = SuiteConfig(
     # RTI domes of the flat-ish worlds, 49 lights to fit and 20 to predict (about 2 minutes
     # each at 128 x 96 and 256 samples per pixel, cached).
     rti_worlds=("matte-relief", "clearcoat-relief", "brushed-knot"),
+    # S = T = 30 under the real panoramas (about 3 minutes each to render at 64 x 64 and 64
+    # samples per pixel, cached; 4 to score).
+    advisor_worlds=("matte-relief", "copper-bowl"),
 )
 
 QUICK = SuiteConfig(

@@ -170,6 +170,8 @@ class ConfigRecord(TypedDict):
     world_field: Sequence[int]
     rti_worlds: Sequence[str]
     rti_capture: Sequence[int]
+    advisor_worlds: Sequence[str]
+    advisor_world_field: Sequence[int]
 
 
 class Machine(TypedDict):
