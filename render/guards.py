@@ -28,6 +28,8 @@ from core.directions import angle_between, panorama_directions, panorama_solid_a
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from processing.interpolation import mean_spacing_deg
+from processing.measured_region import MeasuredRegion
+from processing.panorama import downsample_panorama
 from processing.sample_models import ParametricFit, SampleModels, choose_model
 from render.relight_mode import HeldOutComparison, RelightMode
 
@@ -43,6 +45,8 @@ __all__ = [
     "lobe_width_deg",
     "model_advice",
     "noisy_capture_warning",
+    "outside_light_share",
+    "outside_light_warning",
     "relight_warnings",
     "saturated_capture_warning",
     "sun_share",
@@ -83,6 +87,12 @@ CEILING_TOLERANCE = 1e-3
 #: (clean or well-exposed simulated fields: 0.10-0.14 %, a sun-lit cap; exposed 3x too long:
 #: 3.0 % on the glossy sphere, 49 % on the diffuse one).
 CLIPPED_OBSERVATIONS = 0.01
+#: Share of the panorama's luminous energy outside the measured lights' region above which
+#: interpolating it is warned of (path-traced worlds, S = T = 30, 30 lights: the courtyard puts
+#: 54 % there, the studio 73 %; see :func:`outside_light_warning`).
+OUTSIDE_SHARE = 0.5
+#: Rows of the panorama :func:`outside_light_share` reads.
+OUTSIDE_ROWS = 64
 #: Leave-one-light-out error of the best model above which the capture is called noisy
 #: (clean simulated fields 0-11 % (the torus: its shadows), well exposed 1-5 %; the brightest
 #: values at 0.2 % of the well: 27-57 %).
@@ -337,6 +347,63 @@ def sun_warning(
     )
 
 
+def outside_light_share(rgb: NDArray[np.floating], light_directions: NDArray[np.floating]) -> float:
+    """Share of a panorama's luminous energy outside the region of the measured lights.
+
+    Outside is below the lowest measured lights or below the horizon
+    (:class:`processing.measured_region.MeasuredRegion`); the panorama is read at 64 rows.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (H, 2H, 3), linear radiance
+    light_directions : ndarray, shape (T, 3), the measured lights, rig frame
+
+    Returns
+    -------
+    float in [0, 1] (0 for a black panorama)
+    """
+    image = np.asarray(rgb, dtype=np.float32)
+    if image.shape[0] > OUTSIDE_ROWS:
+        image = downsample_panorama(image, OUTSIDE_ROWS)
+    height, width = image.shape[:2]
+    energy = luminance(image).astype(np.float64) * panorama_solid_angles(height, width)
+    total = float(energy.sum())
+    if total <= 0.0:
+        return 0.0
+    region = MeasuredRegion.build(np.asarray(light_directions, dtype=np.float64))
+    outside = region.outside(panorama_directions(height, width).reshape(-1, 3))
+    return float(energy.reshape(-1)[outside].sum() / total)
+
+
+def outside_light_warning(
+    rgb: NDArray[np.floating], light_directions: NDArray[np.floating]
+) -> RelightWarning | None:
+    """Warn when most of the light comes from where no light was measured.
+
+    Interpolation repeats the lowest measured lights for light from below them (and from below
+    the horizon, which a rig's base blocks but an open scene does not); the per-sample models
+    evaluate their BRDF there. Measured by ``python -m bench.advisor_world`` (path-traced worlds,
+    S = T = 30, 30 lights, between view): under the studio (73 % outside) the models err 22.6 %
+    against 29.7 % for the best interpolation (matte relief) and 43.8 % against 63.7 % (copper
+    bowl); under the courtyard (54 %) 15.8 against 16.0 % and 35.7 against 38.2 %. Under a
+    uniform white sphere interpolation errs 10-25 %, under the upper half alone 4-5 %.
+    Threshold :data:`OUTSIDE_SHARE`.
+    """
+    share = outside_light_share(rgb, light_directions)
+    if share <= OUTSIDE_SHARE:
+        return None
+    lowest = float(np.degrees(np.arccos(np.clip(np.min(light_directions[:, 2]), -1.0, 1.0))))
+    return RelightWarning(
+        "light-outside",
+        f"{share:.0%} of the panorama's light comes from outside the measured lights (below "
+        f"the lowest, at {lowest:.0f} deg inclination, or below the horizon): interpolation "
+        "repeats the lowest lights there, while the per-sample models evaluate their BRDF "
+        "(on path-traced worlds they did better here by 0.2-20 points); relight through the "
+        "models (--scheme model), capture lights nearer the horizon, or darken the panorama "
+        "below the horizon if the object stands on a base that blocks that light",
+    )
+
+
 def grazing_view_warning(
     camera_directions: NDArray[np.floating],
     camera: PinholeCamera,
@@ -546,6 +613,7 @@ def relight_warnings(
             found.append(noisy_capture_warning(models, comparison))
         if alpha is not None:
             found.append(ghosting_warning(field.light_directions, alpha, comparison))
+        found.append(outside_light_warning(rgb, field.light_directions))
         # A pixel field has one fixed view: nothing to interpolate between cameras.
         views = (field.camera_directions, camera) if points else (None, None)
         found.append(

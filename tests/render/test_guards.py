@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from core.camera_model import PinholeCamera
-from core.directions import hemisphere_layout
+from core.directions import hemisphere_layout, panorama_directions
 from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.panorama import read_panorama
 from processing.sample_models import fit_sample_models
@@ -22,6 +22,8 @@ from render.guards import (
     lobe_width_deg,
     model_advice,
     noisy_capture_warning,
+    outside_light_share,
+    outside_light_warning,
     sun_share,
     sun_warning,
     view_warning,
@@ -169,3 +171,20 @@ def test_an_unwritten_camera_of_a_store_is_found(tmp_path: Path) -> None:
     assert empty_cameras(partial) == [1]
     warning = empty_camera_warning(partial)
     assert warning is not None and "rig process" in warning.message
+
+
+def test_light_from_outside_the_measured_lights_is_warned_of() -> None:
+    lights = hemisphere_layout(30)
+    directions = panorama_directions(32, 64)
+    sphere = np.ones((32, 64, 3), dtype=np.float32)
+    upper = np.where(directions[..., 2:3] > 0, sphere, 0.0).astype(np.float32)
+    # Uniform light: the band under the lowest lights (height z) holds z of the upper
+    # hemisphere's energy, the lower hemisphere half the sphere's.
+    z = float(lights[:, 2].min())
+    assert outside_light_share(upper, lights) == pytest.approx(z, abs=0.02)
+    assert outside_light_share(sphere, lights) == pytest.approx(0.5 + z / 2, abs=0.02)
+    assert outside_light_share(np.zeros_like(sphere), lights) == 0.0
+    warning = outside_light_warning(sphere, lights)
+    assert warning is not None and warning.code == "light-outside"
+    assert "--scheme model" in warning.message and "base that blocks" in warning.message
+    assert outside_light_warning(upper, lights) is None
