@@ -143,7 +143,9 @@ def _checked_values(values: NDArray[np.floating], lights: int) -> NDArray[np.flo
 
 
 def _encoded(values: NDArray[np.float32], scale: float) -> NDArray[np.float32]:
-    return np.power(np.maximum(values, 0.0) / scale, 1.0 / GAMMA, dtype=np.float32)
+    """The perceptual encoding (module docstring); a missing (non-finite) value reads as 0."""
+    finite = np.nan_to_num(values, nan=0.0, posinf=0.0, neginf=0.0)
+    return np.power(np.maximum(finite, 0.0) / scale, 1.0 / GAMMA, dtype=np.float32)
 
 
 def _encoder_input(encoded: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -205,7 +207,7 @@ def train_learned_rti(
     rng = np.random.default_rng(settings.seed)
     n = v.shape[1]
     chosen = np.sort(rng.choice(n, size=min(n, settings.max_samples), replace=False))
-    encoded = _encoded(np.nan_to_num(v[:, chosen]), scale)
+    encoded = _encoded(v[:, chosen], scale)
     t_count = len(directions)
     torch.manual_seed(settings.seed)
     torch.set_num_threads(os.cpu_count() or 1)
