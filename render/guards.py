@@ -583,9 +583,10 @@ def relight_warnings(
     """Every warning that applies to relighting ``field`` under ``rgb`` at ``camera``.
 
     The panorama and capture guards apply to every mode; the ones about interpolating the
-    measured lights and cameras (sun, ghosting, views outside or grazing, noise) only to the
-    modes that interpolate (``not mode.uses_models``), since the per-sample models evaluate the
-    fitted BRDF at any light and view and average the noise (bench.stability).
+    measured lights and cameras (sun, ghosting, views outside or grazing, noise, light from
+    outside the measured lights) only to the modes that interpolate (``not mode.uses_models``),
+    since the per-sample models evaluate the fitted BRDF at any light and view and average the
+    noise (bench.stability).
 
     Parameters
     ----------
