@@ -128,7 +128,7 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     add_transfer_option(p)
     p.add_argument("--scheme", choices=(*SCHEMES, "model"), help="how the panorama lights the "
                    "field; model: through per-sample models fitted to it (default: the most "
-                   "accurate, chosen by leave-one-light-out error)")  # fmt: skip
+                   "accurate, chosen by held-out lights)")  # fmt: skip
     p.add_argument("-k", type=count, help="sampled lights (default 64; scheme model: sample K "
                    "lights instead of the panorama's grid)")  # fmt: skip
     p.add_argument("--model", choices=("auto", "auto-per-sample", *MODELS), default="auto",

@@ -125,10 +125,11 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
             f"| {scene} | ground truth | - | - | [png](relight/{scene}/ground-truth.png) |"
         )
         choice = most_accurate_mode(field)
+        best = f"chosen by held-out lights: {choice.mode.describe(choice.models)}"
         methods: dict[str, tuple[str, RelightMode]] = {
             "paper": ("paper: TMED K=64, cosine 3x3, eq. 3", RelightSettings.paper_configuration()),
             "interpolated": ("eq. 2, barycentric", best_settings(field)),
-            "best": (f"chosen by LOO: {choice.mode.describe(choice.models)}", choice.mode),
+            "best": (best, choice.mode),
         }
         for name, (label, mode) in methods.items():
             relighter = open_relighter(field, mode, choice.models)

@@ -131,7 +131,7 @@ def bench_loop(
     """
     modes: dict[str, RelightMode] = {
         "paper": RelightSettings.paper_configuration(CHAIN_K),
-        "default (chosen by leave-one-light-out)": most_accurate_mode(field, models).mode,
+        "default (chosen by held-out lights)": most_accurate_mode(field, models).mode,
         "sampled, barycentric": k_method("sampled, barycentric", CHAIN_K).mode,
         "models, sampled K=64": k_method("models, sampled", CHAIN_K).mode,
     }
