@@ -157,6 +157,26 @@ def _parse_intensity(value: str, where: str) -> float:
     return number
 
 
+def _numbered_lines(file: Path, what: str) -> list[tuple[int, str]]:
+    """Each non-blank line of a text file, stripped, with its number as an editor shows it.
+
+    LF, CRLF and CR endings alike; a UTF-8 byte-order mark is dropped.
+
+    Raises
+    ------
+    DatasetError
+        A missing or unreadable file, named as ``what`` (".lp", "intensity").
+    """
+    try:
+        text = file.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise DatasetError(f"{file}: no such {what} file") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise DatasetError(f"{file}: cannot read as a text {what} file: {error}") from error
+    lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+    return [(number, line.strip()) for number, line in enumerate(lines, 1) if line.strip()]
+
+
 def read_lp(path: str | os.PathLike[str]) -> LightPositions:
     """Read an RTI ``.lp`` file.
 
@@ -181,15 +201,7 @@ def read_lp(path: str | os.PathLike[str]) -> LightPositions:
         names the file and the line.
     """
     file = Path(path)
-    try:
-        text = file.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise DatasetError(f"{file}: no such .lp file") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise DatasetError(f"{file}: cannot read as a text .lp file: {error}") from error
-    # Line numbers as an editor shows them, for \n, \r\n and \r endings alike.
-    lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
-    entries = [(number, line.strip()) for number, line in enumerate(lines, 1) if line.strip()]
+    entries = _numbered_lines(file, ".lp")
     if not entries:
         raise DatasetError(f"{file}, line 1: empty file; an .lp file starts with the image count")
     header_line, header = entries[0]
@@ -275,19 +287,12 @@ def read_intensity_sidecar(
     """
     file = Path(path)
     lp_name = lights.source.name if lights.source is not None else "the .lp file"
-    try:
-        text = file.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise DatasetError(f"{file}: no such intensity file") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise DatasetError(f"{file}: cannot read as a text intensity file: {error}") from error
+    lines = _numbered_lines(file, "intensity")
     index_of = {name: index for index, name in enumerate(lights.files)}
     values = np.full(len(lights), np.nan)
     seen: dict[str, int] = {}
-    lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
-    for number, raw in enumerate(lines, 1):
-        line = raw.strip()
-        if not line or line.startswith("#"):
+    for number, line in lines:
+        if line.startswith("#"):
             continue
         where = f"{file}, line {number}"
         fields = line.rsplit(None, 1)
