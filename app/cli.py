@@ -30,9 +30,11 @@ from app.cli_bench import add_bench_parser
 from app.cli_calibrate import add_calibrate
 from app.cli_capture import add_capture
 from app.cli_evaluate import add_evaluate, add_transfer_option, relight_lights
+from app.cli_export import add_export_web
 from app.cli_plan import add_plan
 from app.cli_process import add_process
 from app.cli_rig import add_doctor, add_sim_start
+from app.cli_view import add_view
 from core.errors import InputError, RigError
 
 __all__ = ["build_parser", "main"]
@@ -685,6 +687,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sample(commands)
     _add_demo(commands)
     _add_relight(commands)
+    add_view(commands)
+    add_export_web(commands)
     add_doctor(commands)
     add_plan(commands)
     add_advise(commands)

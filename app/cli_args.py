@@ -27,6 +27,7 @@ __all__ = [
     "output_directory",
     "output_file",
     "positive",
+    "quality",
     "require_output",
     "squares",
     "whole",
@@ -90,6 +91,17 @@ def whole(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be zero or more, got {text!r}")
+    return value
+
+
+def quality(text: str) -> int:
+    """A JPEG quality: an integer 1..100."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number 1..100, got {text!r}") from None
+    if not 1 <= value <= 100:
+        raise argparse.ArgumentTypeError(f"JPEG quality must be 1..100, got {text!r}")
     return value
 
 

@@ -20,10 +20,13 @@ Radiance .hdr    OpenCV, float32                           RGBE (:func:`write_li
 PNG              OpenCV, 8 or 16 bit                       8-bit sRGB (:func:`write_srgb8`),
                                                            8/16-bit sRGB of linear values
                                                            (:func:`write_linear`), lossless
-                                                           frames (:func:`encode_lossless`)
-JPEG             OpenCV; a file without its end-of-image   8-bit sRGB (:func:`write_srgb8`)
-                 marker is refused (OpenCV would decode
-                 the truncated rest silently)
+                                                           frames (:func:`encode_lossless`),
+                                                           8/16-bit data as given
+                                                           (:func:`write_uint8`,
+                                                           :func:`write_png16`)
+JPEG             OpenCV; a file without its end-of-image   8-bit sRGB (:func:`write_srgb8`),
+                 marker is refused (OpenCV would decode    8-bit data, 4:4:4 if asked
+                 the truncated rest silently)              (:func:`write_uint8`)
 TIFF             tifffile; strips past the end of the      16-bit linear RGB
                  file are refused                          (:func:`write_linear16_tiff`), float
                                                            frames (:func:`encode_lossless`)
@@ -77,6 +80,7 @@ __all__ = [
     "auto_transfer",
     "check_tiff_strips",
     "encode_lossless",
+    "encode_picture",
     "linear_from_pixels",
     "pixel_depth",
     "read_linear",
@@ -84,7 +88,9 @@ __all__ = [
     "write_exr",
     "write_linear",
     "write_linear16_tiff",
+    "write_png16",
     "write_srgb8",
+    "write_uint8",
 ]
 
 EXR_SUFFIXES = frozenset({".exr"})
@@ -462,6 +468,30 @@ def write_srgb8(
     path: str | os.PathLike[str], picture: NDArray[np.uint8], quality: int = 95
 ) -> None:
     """Write an (H, W, 3) uint8 sRGB picture as PNG or JPEG (by suffix, ``quality`` for JPEG)."""
+    write_uint8(path, picture, quality=quality)
+
+
+def write_uint8(
+    path: str | os.PathLike[str],
+    picture: NDArray[np.uint8],
+    *,
+    quality: int = 95,
+    full_chroma: bool = False,
+) -> None:
+    """Write (H, W, 3) uint8 values as PNG or JPEG (by suffix), channel for channel.
+
+    The values are written as given, whatever they encode (an sRGB picture, or data such as
+    the quantised coefficient planes of :mod:`render.web_export`).
+
+    Parameters
+    ----------
+    path : a ``.png``, ``.jpg`` or ``.jpeg`` file
+    picture : ndarray, shape (H, W, 3), uint8, RGB order
+    quality : int, JPEG quality 0..100 (PNG is lossless)
+    full_chroma : bool
+        JPEG: keep the colour channels at full resolution (4:4:4 sampling) rather than the
+        usual 4:2:0; for data whose three channels are unrelated, as planes of coefficients.
+    """
     target = Path(path)
     _check_picture(target, picture, np.uint8)
     suffix = target.suffix.lower()
@@ -469,9 +499,26 @@ def write_srgb8(
         raise ImageFileError(
             f"{target}: an 8-bit picture is written as .png or .jpg, not {suffix!r}"
         )
-    params = [cv2.IMWRITE_JPEG_QUALITY, quality] if suffix != ".png" else []
+    params: list[int] = []
+    if suffix != ".png":
+        params = [cv2.IMWRITE_JPEG_QUALITY, int(quality)]
+        if full_chroma:
+            params += [cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444]
     with atomic_path(target) as temporary:
         _imwrite(temporary, picture[:, :, ::-1], params)
+
+
+def write_png16(path: str | os.PathLike[str], picture: NDArray[np.uint16]) -> None:
+    """Write (H, W, 3) uint16 values as a 16-bit PNG, as given (no transfer curve applied).
+
+    For data such as normal maps; linear images for display go through :func:`write_linear`.
+    """
+    target = Path(path)
+    _check_picture(target, picture, np.uint16)
+    if target.suffix.lower() != ".png":
+        raise ImageFileError(f"{target}: 16-bit values are written as .png, not {target.suffix!r}")
+    with atomic_path(target) as temporary:
+        _imwrite(temporary, picture[:, :, ::-1])
 
 
 def write_linear16_tiff(path: str | os.PathLike[str], picture: NDArray[np.uint16]) -> None:
@@ -480,6 +527,28 @@ def write_linear16_tiff(path: str | os.PathLike[str], picture: NDArray[np.uint16
     _check_picture(target, picture, np.uint16)
     with atomic_path(target) as temporary:
         tifffile.imwrite(temporary, picture, photometric="rgb", metadata=None)
+
+
+def encode_picture(
+    picture: NDArray[np.uint8], suffix: str, *, quality: int = 95
+) -> tuple[str, bytes]:
+    """``(suffix, bytes)`` of an 8-bit RGB (or grey) picture as a ``.jpg`` or ``.png`` file.
+
+    For pictures sent rather than stored (the viewer's frames); ``quality`` is JPEG's, 1-100.
+    """
+    if picture.dtype != np.uint8 or picture.ndim not in (2, 3):
+        raise ImageFileError(
+            f"a picture must be (H, W[, 3]) uint8, got {picture.shape} {picture.dtype}"
+        )
+    suffix = suffix.lower()
+    if suffix not in (".jpg", ".png"):
+        raise ImageFileError(f"pictures are encoded as .jpg or .png, not {suffix}")
+    image = picture[:, :, ::-1] if picture.ndim == 3 else picture  # OpenCV writes BGR
+    params = [cv2.IMWRITE_JPEG_QUALITY, int(quality)] if suffix == ".jpg" else []
+    ok, encoded = cv2.imencode(suffix, np.ascontiguousarray(image), params)
+    if not ok:
+        raise ImageFileError(f"could not encode a {picture.shape} picture as {suffix}")
+    return suffix, encoded.tobytes()
 
 
 def encode_lossless(pixels: NDArray[Any]) -> tuple[str, bytes]:

@@ -78,6 +78,7 @@ from processing.sample_models import (
     fit_sample_models,
 )
 from processing.sample_models.bases import fit_basis
+from processing.sample_models.fits import BasisModelName
 from render.model_relight import prepare_lighting, relight_models
 
 __all__ = [
@@ -90,6 +91,8 @@ __all__ = [
     "PredictorName",
     "bound_factor",
     "choose_rbf_sigma",
+    "eight_bit_levels",
+    "fit_basis_8bit",
     "leave_one_out_barycentric",
     "make_predictor",
     "rbf_weights",
@@ -221,6 +224,50 @@ def _sigma_subset(field: ReflectanceField, seed: int = 0) -> NDArray[np.float32]
 # --- the predictors ------------------------------------------------------------------------
 
 
+def eight_bit_levels(values: NDArray[np.floating], scale: float = 1.0) -> NDArray[np.float32]:
+    """The 8-bit sRGB values, 0..255, that RTI tools fit: scaled, clipped, encoded, rounded.
+
+    Parameters
+    ----------
+    values : ndarray, any shape, linear radiance
+    scale : float, the linear value that 8-bit white stands for is 1 / ``scale``
+
+    Returns
+    -------
+    ndarray, same shape, float32 whole numbers 0..255
+    """
+    encoded = linear_to_srgb(np.clip(np.asarray(values, dtype=np.float32) * scale, 0.0, 1.0))
+    return np.round(encoded * 255.0).astype(np.float32)
+
+
+def fit_basis_8bit(
+    basis: BasisModelName,
+    values: NDArray[np.floating],
+    lights: NDArray[np.floating],
+    scale: float = 1.0,
+) -> NDArray[np.float32]:
+    """Basis coefficients fitted as RTI tools fit them: to the 8-bit sRGB values, 0..255.
+
+    The least-squares fit (:func:`processing.sample_models.bases.fit_basis`) of
+    :func:`eight_bit_levels`; the ``-8bit`` predictors and :mod:`render.web_export` share it.
+
+    Parameters
+    ----------
+    basis : {"ptm", "hsh2", "hsh3"}
+    values : ndarray, shape (T, P, 3), linear radiance of P samples under T lights
+    lights : ndarray, shape (T, 3), the lights in the frame the basis takes (a pixel field's
+        camera frame)
+    scale : float, the linear value that 8-bit white stands for is 1 / ``scale``
+
+    Returns
+    -------
+    ndarray, shape (P, B, 3), float32: coefficients in 8-bit units (a basis sum of 255 is
+    white)
+    """
+    levels = eight_bit_levels(values, scale)
+    return fit_basis(basis, levels, np.asarray(lights, dtype=np.float64)).coefficients
+
+
 def bound_factor(light_directions: NDArray[np.floating]) -> float:
     """How many times its brightest measured value a sample may be predicted (see the module).
 
@@ -277,12 +324,12 @@ class _Basis:
     def _fit(self, camera: int) -> NDArray[np.float32]:
         if camera not in self._coefficients:
             slab = self.field.camera_slab(camera)
-            if self.eight_bit:
-                # As RTI tools fit: the encoded 8-bit values, 0..255.
-                encoded = linear_to_srgb(np.clip(slab * self.scale, 0.0, 1.0))
-                slab = np.round(encoded * 255.0).astype(np.float32)
             lights = _basis_frame_directions(self.field, camera, self.field.light_directions)
-            self._coefficients[camera] = fit_basis(self.basis, slab, lights).coefficients  # type: ignore[arg-type]
+            self._coefficients[camera] = (
+                fit_basis_8bit(self.basis, slab, lights, self.scale)  # type: ignore[arg-type]
+                if self.eight_bit
+                else fit_basis(self.basis, slab, lights).coefficients  # type: ignore[arg-type]
+            )
         return self._coefficients[camera]
 
     def predict(self, camera: int, directions: NDArray[np.floating]) -> NDArray[np.float32]:

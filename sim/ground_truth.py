@@ -17,7 +17,8 @@ The panorama arrives as an array: reading files is the caller's job (``processin
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numba
 import numpy as np
@@ -27,10 +28,12 @@ from tqdm import tqdm
 from core.brdf import specular_lobe
 from core.camera_model import PinholeCamera
 from core.light_set import LightSet, grid_lights
-from sim.scenes import SurfaceSamples
+from sim.scenes import SurfaceSamples, build_scene, get_scene
 from sim.synthetic_camera import DirectionalLight, SyntheticImage, image_of_points, light_visibility
 
 __all__ = [
+    "FieldTruth",
+    "field_truth",
     "render_environment",
     "shade_environment",
     "shade_environment_views",
@@ -38,6 +41,11 @@ __all__ = [
 
 #: Directions shaded together (bounds the memory of the visibility matrix).
 CHUNK = 64
+
+#: The truth of a view under a panorama: linear RGB (H, W, 3) and coverage (H, W).
+FieldTruth = Callable[
+    [NDArray[np.float32], PinholeCamera], tuple[NDArray[np.float32], NDArray[np.bool_]]
+]
 
 
 def shade_environment(
@@ -152,3 +160,30 @@ def _shade(
         out[p, 0] += r
         out[p, 1] += g
         out[p, 2] += b
+
+
+def field_truth(provenance: Mapping[str, Any]) -> FieldTruth | None:
+    """The ground truth of a simulated field's object under any panorama and view.
+
+    A field written by :func:`sim.field.simulate_field` records its scene and point count; the
+    scene's samples are rebuilt from them (the builders are deterministic), and each call
+    renders them with :func:`render_environment`. Other fields (captured, imported, or
+    path-traced, whose truth takes minutes) have none: None.
+
+    Parameters
+    ----------
+    provenance : mapping, the field store's ``provenance`` attribute
+    """
+    if provenance.get("source") != "simulator":
+        return None
+    name = str(provenance["scene"]["name"])
+    samples = build_scene(name, int(provenance["points"]))
+    shadows = not get_scene(name).convex
+
+    def truth(
+        rgb: NDArray[np.float32], camera: PinholeCamera
+    ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+        image = render_environment(samples, rgb, camera, shadows=shadows)
+        return image.rgb, image.coverage
+
+    return truth

@@ -1236,6 +1236,27 @@ def _cases() -> list[Case]:
             ("existing.txt",),
         ),
     ]
+    # rig view (refused before it serves) and rig export-web
+    cases += _panorama_cases(("view", "{field}"), ("--env",))
+    export = ("export-web", "{rti}", "-o", "{tmp}/web")
+    cases += [
+        Case("view: missing field", ("view", "{tmp}/none.zarr"), ("none.zarr", "no such")),
+        Case("view: --port 70000", ("view", "{field}", "--port", "70000"), ("--port", "70000")),
+        Case("view: --size 0x0", ("view", "{field}", "--size", "0x0"), ("--size",)),
+        Case(
+            "export-web: a field of points",
+            ("export-web", "{field}", "-o", "{tmp}/web"),
+            ("pixels",),
+        ),
+        Case("export-web: --camera 1", (*export, "--camera", "1"), ("--camera 1", "dirs.lp")),
+        Case("export-web: --models rbf", (*export, "--models", "rbf"), ("rbf",)),
+        Case("export-web: --quality 0", (*export, "--quality", "0"), ("quality",)),
+        Case(
+            "export-web: -o a file",
+            ("export-web", "{rti}", "-o", F + "existing.txt"),
+            ("existing.txt",),
+        ),
+    ]
     return cases
 
 

@@ -1,0 +1,91 @@
+"""``rig view``: relight a field live in the browser.
+
+Application layer (like ``app/cli.py``): it opens the field, chooses its best mode, builds the
+session (:class:`render.live_session.LiveSession`, with the simulator's ground truth for a
+simulated field) and serves it (:mod:`app.live_server`) until interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from app.cli_args import image_size, whole
+from app.cli_evaluate import add_transfer_option
+
+__all__ = ["add_view", "open_session"]
+
+
+def add_view(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``rig view`` on the ``rig`` sub-command parser."""
+    p = commands.add_parser(
+        "view",
+        help="relight a field live in the browser",
+        description="Serve a page where a field is relit live: choose or drop a panorama, drag "
+        "it to rotate it, orbit and zoom the view, set exposure, K and the sampler, paint or "
+        "load a modulation map, switch between the paper's configuration and the best mode, "
+        "see the sampled lights, the frame time, the guards' warnings and (simulated fields) the "
+        "ground truth and error; save the frame (PNG, EXR) and the settings. Prints the URL to "
+        "open; Ctrl-C stops it.",
+    )
+    p.add_argument(
+        "field", type=Path, help="reflectance field store, or an RTI .lp file (or its folder)"
+    )
+    p.add_argument("--env", type=Path, action="append", help="a panorama to offer (repeat for "
+                   "more; default: the bundled courtyard and studio)")  # fmt: skip
+    p.add_argument("--models", type=Path, help="saved fit of the field (default: beside it)")
+    p.add_argument("--size", type=image_size, default=(512, 512),
+                   help="view size of a field of points (default 512x512)")  # fmt: skip
+    p.add_argument("--host", default="127.0.0.1", help="address to serve on (default "
+                   "127.0.0.1: this machine only; the viewer has no login)")  # fmt: skip
+    p.add_argument("--port", type=_port, default=0, help="port (default: a free one)")
+    add_transfer_option(p)
+    p.set_defaults(handler=_run_view)
+
+
+def _port(text: str) -> int:
+    value = whole(text)
+    if value > 65535:
+        raise argparse.ArgumentTypeError(f"a port is 0..65535, got {text!r}")
+    return value
+
+
+def open_session(
+    field: Any, panoramas: list[Path] | None, *, size: tuple[int, int], models: Path | None
+) -> Any:
+    """The live session of ``field`` under the given panoramas (default: the bundled ones)."""
+    from core.sample_data import PANORAMA_NAMES, panorama_path
+    from processing.panorama import read_panorama
+    from render.live_session import LiveSession
+    from render.relight_mode import most_accurate_mode
+    from sim.ground_truth import field_truth
+
+    paths = panoramas or [panorama_path(name) for name in PANORAMA_NAMES]
+    loaded = {}
+    for path in paths:
+        panorama = read_panorama(path)
+        if panorama.note:
+            print(panorama.note)
+        loaded[path.name] = panorama
+    choice = most_accurate_mode(field, models_path=models, progress=True)
+    print(f"best mode: {choice.reason}")
+    return LiveSession(field, choice, loaded, size=size, truth=field_truth(field.provenance))
+
+
+def _run_view(args: argparse.Namespace) -> int:
+    from app.live_server import start_viewer
+    from processing.rti import open_field_or_rti
+
+    with open_field_or_rti(args.field, progress=True, transfer=args.transfer) as field:
+        session = open_session(field, args.env, size=args.size, models=args.models)
+        server = start_viewer(session, host=args.host, port=args.port)
+        print(f"rig view: open {server.url} in a browser (Ctrl-C stops)", flush=True)
+        try:
+            server.wait()
+        except KeyboardInterrupt:
+            print("stopped", file=sys.stderr)
+        finally:
+            server.stop()
+    return 0

@@ -1,0 +1,321 @@
+"""The browser viewer's server: a page, and frames over a WebSocket (``rig view``).
+
+The server is aiohttp: one well-kept library for the static page, the small JSON routes,
+uploads and the WebSocket the frames stream over, on asyncio, with no framework or build step
+beside it. The page (``app/web/``) is plain HTML and JavaScript: it sends the controls as JSON
+and shows the JPEG frames it receives; the relighting stays in Python
+(:class:`render.live_session.LiveSession`), so the page shows exactly what ``rig relight``
+renders.
+
+Routes
+------
+``GET /``                     the page (``/viewer.js``, ``/viewer.css`` beside it)
+``GET /api/state``            the field, the modes, the loaded panoramas and maps, the controls
+``GET /api/live`` (WebSocket)  in: ``{"controls": {...}}`` (any subset); out: a JSON message
+                              ``{"type": "frame", ...}`` followed by two binary messages, the
+                              frame and the panorama (JPEG, a first byte 1 or 2 naming which);
+                              then ``{"type": "warnings", ...}`` and, with ``truth`` on, the truth
+                              and error pictures (bytes 3 and 4) and ``{"type": "truth", ...}``.
+                              A request that arrives while a frame renders replaces any waiting
+                              one, so the page never queues stale frames.
+``POST /api/panorama?name=F``  a panorama file (EXR, HDR, PNG, JPEG) in the body
+``POST /api/modulation?name=F`` a modulation map (PNG, EXR, ...) in the body
+``GET /api/frame.png``, ``/api/frame.exr``  the current frame (tone-mapped, or linear + alpha)
+``GET /api/settings.json``    the current settings
+
+The server binds 127.0.0.1 by default: the viewer has no authentication, so exposing it on a
+network is the user's explicit choice (``--host``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import tempfile
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from aiohttp import WSMsgType, web
+
+from core.errors import InputError, RigError
+from core.image_io import encode_picture
+from processing.environment import read_modulation_map
+from processing.panorama import read_panorama
+from processing.sampling import SAMPLERS
+from render.live_session import LIVE_MODES, ZOOM_RANGE, LiveSession
+from render.output import write_image
+
+__all__ = ["FRAME_JPEG_QUALITY", "ViewerServer", "start_viewer"]
+
+#: JPEG quality of streamed frames: a 512 x 512 frame is about 40 KB and encodes in ~3 ms.
+FRAME_JPEG_QUALITY = 90
+#: Largest upload (a 4k x 2k float EXR panorama is ~100 MB).
+MAX_UPLOAD_BYTES = 256 * 1024 * 1024
+#: The first byte of each binary WebSocket message: which picture follows.
+PICTURE_TAGS = {"frame": 1, "panorama": 2, "truth": 3, "error": 4}
+_WEB = "web"
+_SUFFIXES = {".exr", ".hdr", ".png", ".jpg", ".jpeg", ".tif", ".tiff"}
+
+
+def _page_file(name: str) -> bytes:
+    return (resources.files("app") / _WEB / name).read_bytes()
+
+
+class _Viewer:
+    """The session behind the routes: one render at a time, on one worker thread."""
+
+    def __init__(self, session: LiveSession, uploads: Path) -> None:
+        self.session = session
+        self.uploads = uploads
+        self.controls = session.initial
+        self.lock = asyncio.Lock()
+        self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="relight")
+
+    async def run(self, call: Any, *args: Any) -> Any:
+        async with self.lock:
+            return await asyncio.get_running_loop().run_in_executor(self.worker, call, *args)
+
+    def state(self) -> dict[str, Any]:
+        s = self.session
+        return {
+            "field": str(s.field.path),
+            "kind": s.field.sample_kind,
+            "shape": list(s.field.shape),
+            "can_orbit": s.can_orbit,
+            "has_truth": s.truth is not None,
+            "panoramas": list(s.panoramas),
+            "modulations": list(s.modulations),
+            "modes": {
+                "paper": s.mode(self.controls.updated({"mode": "paper"})).describe(),
+                "best": s.best.reason,
+            },
+            "live_modes": list(LIVE_MODES),
+            "samplers": list(SAMPLERS),
+            "zoom_range": list(ZOOM_RANGE),
+            "controls": self.controls.to_json(),
+        }
+
+
+VIEWER = web.AppKey("viewer", _Viewer)
+
+
+def _error(status: type[web.HTTPException], message: str) -> web.HTTPException:
+    return status(text=json.dumps({"error": message}), content_type="application/json")
+
+
+async def _index(request: web.Request) -> web.Response:
+    return web.Response(body=_page_file("index.html"), content_type="text/html")
+
+
+async def _static(request: web.Request) -> web.Response:
+    name = request.match_info["name"]
+    kinds = {"viewer.js": "text/javascript", "viewer.css": "text/css"}
+    return web.Response(body=_page_file(name), content_type=kinds[name])
+
+
+async def _state(request: web.Request) -> web.Response:
+    viewer = request.app[VIEWER]
+    return web.json_response(viewer.state())
+
+
+async def _upload(request: web.Request, kind: str) -> web.Response:
+    viewer = request.app[VIEWER]
+    name = Path(request.query.get("name", "")).name
+    suffix = Path(name).suffix.lower()
+    if suffix not in _SUFFIXES:
+        raise _error(web.HTTPBadRequest, f"{name or 'the upload'}: send one of "
+                     f"{', '.join(sorted(_SUFFIXES))} with ?name=FILE")  # fmt: skip
+    body = await request.read()
+    if not body:
+        raise _error(web.HTTPBadRequest, f"{name}: the upload is empty")
+    folder = Path(tempfile.mkdtemp(dir=viewer.uploads))
+    path = folder / name
+    path.write_bytes(body)
+
+    def load() -> None:
+        if kind == "panorama":
+            panorama = read_panorama(path, resample=True)
+            viewer.session.add_panorama(name, panorama)
+        else:
+            viewer.session.add_modulation(name, read_modulation_map(path))
+
+    try:
+        await viewer.run(load)
+    except RigError as error:
+        raise _error(web.HTTPBadRequest, str(error)) from None
+    return web.json_response({"name": name, **viewer.state()})
+
+
+async def _panorama(request: web.Request) -> web.Response:
+    return await _upload(request, "panorama")
+
+
+async def _modulation(request: web.Request) -> web.Response:
+    return await _upload(request, "modulation")
+
+
+async def _frame_file(request: web.Request) -> web.Response:
+    viewer = request.app[VIEWER]
+    suffix = request.match_info["suffix"]
+    frame = viewer.session.frame
+    if frame is None:
+        raise _error(web.HTTPNotFound, "no frame has been rendered yet")
+    if suffix == "png":
+        _, body = encode_picture(frame.picture, ".png")
+    else:
+        path = Path(tempfile.mkdtemp(dir=viewer.uploads)) / "frame.exr"
+        write_image(path, frame.image.rgb, frame.image.coverage)
+        body = path.read_bytes()
+    return web.Response(
+        body=body,
+        content_type="image/png" if suffix == "png" else "image/x-exr",
+        headers={"Content-Disposition": f'attachment; filename="relit.{suffix}"'},
+    )
+
+
+async def _settings(request: web.Request) -> web.Response:
+    viewer = request.app[VIEWER]
+    try:
+        settings = viewer.session.settings()
+    except InputError as error:
+        raise _error(web.HTTPNotFound, str(error)) from None
+    return web.json_response(
+        settings, headers={"Content-Disposition": 'attachment; filename="settings.json"'}
+    )
+
+
+async def _send_picture(socket: web.WebSocketResponse, tag: str, picture: Any) -> None:
+    _, jpeg = encode_picture(picture, ".jpg", quality=FRAME_JPEG_QUALITY)
+    await socket.send_bytes(bytes([PICTURE_TAGS[tag]]) + jpeg)
+
+
+async def _live(request: web.Request) -> web.WebSocketResponse:
+    viewer = request.app[VIEWER]
+    socket = web.WebSocketResponse(max_msg_size=1 << 20)
+    await socket.prepare(request)
+    wanted = asyncio.Event()
+    pending: dict[str, Any] = {}
+    sequence = 0
+
+    async def render_loop() -> None:
+        nonlocal sequence
+        while not socket.closed:
+            await wanted.wait()
+            wanted.clear()
+            changes = dict(pending)
+            pending.clear()
+            sequence += 1
+            try:
+                controls = viewer.controls.updated(changes)
+                frame = await viewer.run(viewer.session.render, controls)
+            except RigError as error:
+                await socket.send_json({"type": "error", "seq": sequence, "message": str(error)})
+                continue
+            viewer.controls = controls
+            await socket.send_json({
+                "type": "frame", "seq": sequence, "controls": controls.to_json(),
+                "mode": frame.mode, "notes": list(frame.notes),
+                "ms": {k: round(v * 1000.0, 2) for k, v in frame.seconds.items()},
+                "points": int(frame.image.needed.sum()),
+            })  # fmt: skip
+            await _send_picture(socket, "frame", frame.picture)
+            await _send_picture(socket, "panorama", frame.panorama_picture)
+            if wanted.is_set():
+                continue  # the next frame is wanted: its warnings, not these
+            warnings = await viewer.run(viewer.session.warnings)
+            await socket.send_json({"type": "warnings", "seq": sequence, "warnings": warnings})
+            if controls.truth and not wanted.is_set():
+                truth = await viewer.run(viewer.session.compare_truth)
+                if truth is not None:
+                    await _send_picture(socket, "truth", truth.picture)
+                    await _send_picture(socket, "error", truth.error_picture)
+                    await socket.send_json({
+                        "type": "truth", "seq": sequence, "relative_rmse": truth.relative_rmse,
+                        "ms": round(truth.seconds * 1000.0, 2),
+                    })  # fmt: skip
+
+    task = asyncio.create_task(render_loop())
+    try:
+        async for message in socket:
+            if message.type != WSMsgType.TEXT:
+                continue
+            try:
+                data = json.loads(message.data)
+                changes = data["controls"]
+                if not isinstance(changes, dict):
+                    raise TypeError
+            except (ValueError, KeyError, TypeError):
+                await socket.send_json({"type": "error", "message": 'send {"controls": {...}}'})
+                continue
+            pending.update(changes)
+            wanted.set()
+    finally:
+        task.cancel()
+    return socket
+
+
+def build_app(session: LiveSession, uploads: Path) -> web.Application:
+    """The aiohttp application of the viewer over ``session``."""
+    app = web.Application(client_max_size=MAX_UPLOAD_BYTES)
+    app[VIEWER] = _Viewer(session, uploads)
+    app.router.add_get("/", _index)
+    app.router.add_get("/{name:viewer\\.(js|css)}", _static)
+    app.router.add_get("/api/state", _state)
+    app.router.add_get("/api/live", _live)
+    app.router.add_post("/api/panorama", _panorama)
+    app.router.add_post("/api/modulation", _modulation)
+    app.router.add_get("/api/frame.{suffix:png|exr}", _frame_file)
+    app.router.add_get("/api/settings.json", _settings)
+    return app
+
+
+@dataclass
+class ViewerServer:
+    """A running viewer: its URL, and how to stop it."""
+
+    url: str
+    _loop: asyncio.AbstractEventLoop
+    _runner: web.AppRunner
+    _thread: threading.Thread
+    _uploads: tempfile.TemporaryDirectory[str]
+
+    def stop(self) -> None:
+        """Stop serving and remove the uploads."""
+        future = asyncio.run_coroutine_threadsafe(self._runner.cleanup(), self._loop)
+        future.result(timeout=10.0)
+        self._loop.call_soon_threadsafe(self._loop.stop)
+        self._thread.join(timeout=10.0)
+        self._loop.close()
+        self._runner.app[VIEWER].worker.shutdown(wait=True)
+        self._uploads.cleanup()
+
+    def wait(self) -> None:
+        """Serve until interrupted (Ctrl-C)."""
+        self._thread.join()
+
+
+def start_viewer(session: LiveSession, *, host: str = "127.0.0.1", port: int = 0) -> ViewerServer:
+    """Serve the viewer on ``host``:``port`` (0: a free port) from a background thread."""
+    uploads = tempfile.TemporaryDirectory(prefix="rig-view-")
+    loop = asyncio.new_event_loop()
+    runner = web.AppRunner(build_app(session, Path(uploads.name)), access_log=None)
+    try:
+        loop.run_until_complete(runner.setup())
+        loop.run_until_complete(web.TCPSite(runner, host, port).start())
+    except BaseException as error:
+        loop.run_until_complete(runner.cleanup())
+        loop.close()
+        uploads.cleanup()
+        if isinstance(error, OSError):
+            reason = error.strerror or error
+            raise InputError(f"cannot serve on {host}:{port}: {reason}") from None
+        raise
+    bound = runner.addresses[0]
+    shown = f"[{bound[0]}]" if ":" in str(bound[0]) else bound[0]
+    thread = threading.Thread(target=loop.run_forever, name="rig-view", daemon=True)
+    thread.start()
+    return ViewerServer(f"http://{shown}:{bound[1]}/", loop, runner, thread, uploads)

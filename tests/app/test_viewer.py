@@ -1,0 +1,229 @@
+"""``rig view`` in a real browser: Debian's Chromium driven by Playwright.
+
+The page must show what the model computes: after a drag of the panorama by half its width
+(a yaw of 180 degrees) the picture on screen is the engine's own relighting at that yaw, and the
+highlight has moved. Screenshots are kept in ``test-artifacts/viewer/`` (or
+``$RIG_TEST_ARTIFACTS/viewer``). Without a Chromium the browser tests skip, saying so; CI
+installs one (``.ci/run``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+
+from app.cli import main
+from app.cli_view import open_session
+from app.live_server import ViewerServer, start_viewer
+from core.colour import luminance
+from core.field_store import ReflectanceField
+from core.sample_data import panorama_path
+from render.live_session import LiveSession
+from render.output import display_picture
+from render.relight_mode import open_relighter
+from sim.field import field_cameras, simulate_field
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+# As the machine notes say: without the background-networking flags Chromium keeps trying
+# hosts this closed network refuses.
+CHROMIUM_ARGS = [
+    "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+]  # fmt: skip
+ARTIFACTS = Path(os.environ.get("RIG_TEST_ARTIFACTS", Path(__file__).parents[2] / "test-artifacts"))
+SIZE = 160
+
+
+@pytest.fixture(scope="module")
+def viewer(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[ViewerServer, LiveSession]]:
+    path = tmp_path_factory.mktemp("viewer") / "glossy.zarr"
+    simulate_field(
+        path, "glossy-sphere", lights=12, cameras=field_cameras(12, width=64, height=64),
+        points=3000,
+    )  # fmt: skip
+    session = open_session(
+        ReflectanceField.open(path), [panorama_path("courtyard")], size=(SIZE, SIZE), models=None
+    )
+    server = start_viewer(session)
+    yield server, session
+    server.stop()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    if CHROMIUM is None:
+        pytest.skip("no Chromium installed (apt-get install chromium; CI installs it)")
+    playwright = pytest.importorskip("playwright.sync_api")
+    with playwright.sync_playwright() as p:
+        launched = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield launched
+        launched.close()
+
+
+def _shown(page: Any, selector: str, name: str) -> np.ndarray:
+    """The pixels an image element shows, as the browser decoded them (RGB uint8).
+
+    A screenshot of the element is kept as an artefact; the pixels come from the element
+    itself (a screenshot at a fractional page offset gains a row).
+    """
+    folder = ARTIFACTS / "viewer"
+    folder.mkdir(parents=True, exist_ok=True)
+    page.locator(selector).screenshot(path=str(folder / f"{name}.png"))
+    width, height, data = page.evaluate(
+        """(selector) => {
+            const img = document.querySelector(selector);
+            const canvas = document.createElement("canvas");
+            canvas.width = img.naturalWidth;
+            canvas.height = img.naturalHeight;
+            const context = canvas.getContext("2d");
+            context.drawImage(img, 0, 0);
+            const pixels = context.getImageData(0, 0, canvas.width, canvas.height).data;
+            return [canvas.width, canvas.height, Array.from(pixels)];
+        }""",
+        selector,
+    )
+    return np.array(data, dtype=np.uint8).reshape(height, width, 4)[:, :, :3]
+
+
+def _wait_frame(page: Any, condition: str) -> None:
+    page.wait_for_function(
+        "() => state.meta && document.body.dataset.frame === String(state.meta.seq) && "
+        f"({condition})",
+        timeout=60_000,
+    )
+    # ... and painted: two animation frames later the screen holds it.
+    page.evaluate("() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
+
+
+def _highlight(picture: np.ndarray) -> np.ndarray:
+    """Centroid (x, y) of the brightest 1 % of the pixels."""
+    y = luminance(picture.astype(np.float64))
+    rows, cols = np.nonzero(y >= np.quantile(y, 0.99))
+    return np.array([cols.mean(), rows.mean()])
+
+
+def test_dragging_the_panorama_half_a_turn_relights_as_the_model_says(
+    viewer: tuple[ViewerServer, LiveSession], browser: Any
+) -> None:
+    server, session = viewer
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.goto(server.url)
+    _wait_frame(page, "state.meta.controls.yaw_deg === 0")
+    before = _shown(page, "#frame", "yaw-0")
+    page.screenshot(path=str(ARTIFACTS / "viewer" / "page-yaw-0.png"))
+    assert before.shape == (SIZE, SIZE, 3)
+
+    box = page.locator("#panorama").bounding_box()
+    middle = box["y"] + box["height"] / 2
+    page.mouse.move(box["x"] + 20, middle)
+    page.mouse.down()
+    page.mouse.move(box["x"] + 20 + box["width"] / 2, middle, steps=8)
+    page.mouse.up()
+    _wait_frame(page, "state.meta.controls.yaw_deg === -180")
+    after = _shown(page, "#frame", "yaw-180")
+    page.screenshot(path=str(ARTIFACTS / "viewer" / "page-yaw-180.png"))
+    assert page.inner_text("#yaw-value") == "-180°"
+
+    # What the model says, computed here without the session: the best mode's engine at
+    # yaw 180, shown at the session's display exposure.
+    frame = session.frame
+    assert frame is not None and frame.controls.yaw_deg == -180.0
+    engine = open_relighter(session.field, session.best.mode, session.best.models)
+    engine.set_lighting(session.panoramas["courtyard.exr"], yaw_deg=180.0)
+    engine.set_view(frame.camera)
+    image = engine.render()
+    expected = display_picture(image.rgb, image.coverage, frame.exposure)
+    difference = np.abs(after.astype(np.int16) - expected.astype(np.int16))
+    assert difference.mean() < 2.0, "the page shows another picture than the engine renders"
+    assert np.abs(after.astype(np.int16) - before.astype(np.int16)).mean() > 5.0
+    moved = np.linalg.norm(_highlight(after) - _highlight(before))
+    assert moved > 0.1 * SIZE, f"the highlight moved {moved:.1f} px"
+    assert errors == []
+    page.close()
+
+
+def test_truth_error_mode_switch_and_saving(
+    viewer: tuple[ViewerServer, LiveSession], browser: Any
+) -> None:
+    server, session = viewer
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    page.goto(server.url)
+    _wait_frame(page, "true")
+    page.check("#truth-on")
+    page.wait_for_function("() => !document.getElementById('error-figure').hidden", timeout=60_000)
+    page.wait_for_function("() => document.getElementById('truth-error').textContent !== ''")
+    truth = _shown(page, "#truth", "truth")
+    shown_error = float(page.inner_text("#truth-error").split()[2]) / 100
+    comparison = session.compare_truth()
+    assert comparison is not None
+    assert shown_error == pytest.approx(comparison.relative_rmse, abs=5e-5)
+    assert np.abs(truth.astype(np.int16) - comparison.picture.astype(np.int16)).mean() < 2.0
+    assert comparison.relative_rmse < 0.05  # the glossy sphere is the models' own family
+
+    page.check("input[name=mode][value=paper]")
+    _wait_frame(page, "state.meta.controls.mode === 'paper'")
+    assert "sampled, paper" in page.inner_text("#mode-name")
+    page.select_option("#k", "16")
+    _wait_frame(page, "state.meta.controls.k === 16")
+    page.wait_for_function("() => document.getElementById('warnings').children.length > 0")
+    assert "ghosting" in page.inner_text("#warnings")  # a narrow lobe, 12 measured lights
+    _shown(page, "#panorama", "panorama-paper-k16")
+
+    with page.expect_download() as download:
+        page.click("#save-settings")
+    settings = json.loads(Path(download.value.path()).read_text())
+    assert settings["controls"]["k"] == 16 and settings["mode"] == "sampled, paper"
+    with page.expect_download() as download:
+        page.click("#save-png")
+    saved = cv2.imread(str(download.value.path()))[:, :, ::-1]
+    assert session.frame is not None and np.array_equal(saved, session.frame.picture)
+    page.close()
+
+
+def _post(url: str, body: bytes) -> tuple[int, dict[str, Any]]:
+    request = urllib.request.Request(url, data=body, method="POST")
+    try:
+        with urllib.request.urlopen(request, timeout=30) as response:
+            return response.status, json.loads(response.read())
+    except urllib.error.HTTPError as error:
+        return error.code, json.loads(error.read())
+
+
+def test_bad_uploads_are_refused_with_the_reason(
+    viewer: tuple[ViewerServer, LiveSession], tmp_path: Path
+) -> None:
+    server, session = viewer
+    status, body = _post(server.url + "api/panorama?name=notes.txt", b"hello")
+    assert status == 400 and "notes.txt" in body["error"]
+    status, body = _post(server.url + "api/panorama?name=broken.exr", b"not an exr")
+    assert status == 400 and "broken.exr" in body["error"]
+    status, body = _post(server.url + "api/modulation?name=zero.png", _png(np.zeros((8, 16))))
+    assert status == 400 and "zero" in body["error"]
+    status, body = _post(server.url + "api/modulation?name=half.png", _png(np.full((8, 16), 128)))
+    assert status == 200 and "half.png" in body["modulations"]
+    assert "half.png" in session.modulations
+
+
+def _png(grey: np.ndarray) -> bytes:
+    ok, encoded = cv2.imencode(".png", grey.astype(np.uint8))
+    assert ok
+    return encoded.tobytes()
+
+
+def test_view_refuses_a_field_that_is_not_there(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["view", str(tmp_path / "missing.zarr")]) == 2
+    assert "missing.zarr" in capsys.readouterr().err
