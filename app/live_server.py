@@ -17,7 +17,9 @@ Routes
                               then ``{"type": "warnings", ...}`` and, with ``truth`` on, the truth
                               and error pictures (bytes 3 and 4) and ``{"type": "truth", ...}``.
                               A request that arrives while a frame renders replaces any waiting
-                              one, so the page never queues stale frames.
+                              one, so the page never queues stale frames. A frame of
+                              precomputed lighting is followed, once no control has changed for
+                              0.3 s, by the exact frame (``"exact": true`` in its controls).
 ``POST /api/panorama?name=F``  a panorama file (EXR, HDR, PNG, JPEG) in the body
 ``POST /api/modulation?name=F`` a modulation map (PNG, EXR, ...) in the body
 ``GET /api/frame.png``, ``/api/frame.exr``  the current frame (tone-mapped, or linear + alpha)
@@ -30,6 +32,7 @@ network is the user's explicit choice (``--host``).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import tempfile
 import threading
@@ -46,13 +49,15 @@ from core.image_io import encode_picture
 from processing.environment import read_modulation_map
 from processing.panorama import read_panorama
 from processing.sampling import SAMPLERS
-from render.live_session import LIVE_MODES, ZOOM_RANGE, LiveSession
+from render.live_session import LIVE_MODES, ZOOM_RANGE, LiveFrame, LiveSession
 from render.output import write_image
 
 __all__ = ["FRAME_JPEG_QUALITY", "ViewerServer", "start_viewer"]
 
 #: JPEG quality of streamed frames: a 512 x 512 frame is about 40 KB and encodes in ~3 ms.
 FRAME_JPEG_QUALITY = 90
+#: Seconds without a new control before an interactive frame is refined to the exact sum.
+REFINE_AFTER_S = 0.3
 #: Largest upload (a 4k x 2k float EXR panorama is ~100 MB).
 MAX_UPLOAD_BYTES = 256 * 1024 * 1024
 #: The first byte of each binary WebSocket message: which picture follows.
@@ -193,6 +198,17 @@ async def _send_picture(socket: web.WebSocketResponse, tag: str, picture: Any) -
     await socket.send_bytes(bytes([PICTURE_TAGS[tag]]) + jpeg)
 
 
+async def _send_frame(socket: web.WebSocketResponse, sequence: int, frame: LiveFrame) -> None:
+    await socket.send_json({
+        "type": "frame", "seq": sequence, "controls": frame.controls.to_json(),
+        "mode": frame.mode, "notes": list(frame.notes),
+        "ms": {k: round(v * 1000.0, 2) for k, v in frame.seconds.items()},
+        "points": int(frame.image.needed.sum()),
+    })  # fmt: skip
+    await _send_picture(socket, "frame", frame.picture)
+    await _send_picture(socket, "panorama", frame.panorama_picture)
+
+
 async def _live(request: web.Request) -> web.WebSocketResponse:
     viewer = request.app[VIEWER]
     socket = web.WebSocketResponse(max_msg_size=1 << 20)
@@ -216,14 +232,17 @@ async def _live(request: web.Request) -> web.WebSocketResponse:
                 await socket.send_json({"type": "error", "seq": sequence, "message": str(error)})
                 continue
             viewer.controls = controls
-            await socket.send_json({
-                "type": "frame", "seq": sequence, "controls": controls.to_json(),
-                "mode": frame.mode, "notes": list(frame.notes),
-                "ms": {k: round(v * 1000.0, 2) for k, v in frame.seconds.items()},
-                "points": int(frame.image.needed.sum()),
-            })  # fmt: skip
-            await _send_picture(socket, "frame", frame.picture)
-            await _send_picture(socket, "panorama", frame.panorama_picture)
+            await _send_frame(socket, sequence, frame)
+            if viewer.session.refinable(controls):
+                # Interactive frames are precomputed; once the person stops, the exact sum.
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(wanted.wait(), REFINE_AFTER_S)
+                if wanted.is_set():
+                    continue
+                sequence += 1
+                exact = controls.updated({"exact": True})
+                frame = await viewer.run(viewer.session.render, exact)
+                await _send_frame(socket, sequence, frame)
             if wanted.is_set():
                 continue  # the next frame is wanted: its warnings, not these
             warnings = await viewer.run(viewer.session.warnings)

@@ -67,7 +67,7 @@ from bench.suite_methods import (
     config_record,
     k_method,
 )
-from bench.suite_product import bench_product
+from bench.suite_product import bench_product, interactive_record
 from bench.suite_results import (
     AdvisorRecord,
     FieldRecord,
@@ -194,7 +194,7 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
         "peak_rss_MB": _max_rss_kib() / 1024,
         "rss_growth_MB": (_max_rss_kib() - rss_start) / 1024,
     }
-    return {
+    results: SuiteResults = {
         "config": config_record(config),
         "machine": at_end,
         "chain_field": list(config.chain_field),
@@ -215,6 +215,9 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
         "guard_advice": guard_advice,
         "wall_s": time.perf_counter() - started,
     }
+    if "loop" in product:
+        results["interactive"] = interactive_record(product["loop"])
+    return results
 
 
 def main(argv: list[str] | None = None) -> int:

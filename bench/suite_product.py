@@ -2,13 +2,17 @@
 
 The capture sweep runs on the simulated rig through the real drivers
 (:func:`bench.capture.bench_capture`); the loop times a new lighting and a new view of the
-paper's configuration, the mode ``rig relight`` chooses by default and two of our own, each
-against a 30 fps frame and, for the interpolating engines, against the memory bandwidth
-floor of reading the view's blended field once.
+paper's configuration, the mode ``rig relight`` chooses by default, its interactive variant
+(the models' grid sum split into precomputed terms, :mod:`render.precomputed_lighting`) and two
+of our own, each against a 30 fps frame and, for the interpolating engines, against the memory
+bandwidth floor of reading the view's blended field once; and each mode's error against its
+own exact reference (the same predictors with the panorama summed exactly,
+``mode.exact_lighting``), the price of its lighting approximation.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import cast
 
@@ -18,20 +22,38 @@ from bench.capture import bench_capture
 from bench.relight import copy_bandwidth, field_path, loop_ms
 from bench.suite_fields import FieldRun, spec_record, views_of
 from bench.suite_methods import CHAIN_K, FieldSpec, SuiteConfig, k_method, mode_record
-from bench.suite_results import CaptureRecord, LoopModeRecord, LoopRecord, ProductRecord
+from bench.suite_results import (
+    CaptureRecord,
+    InteractiveRecord,
+    LoopModeRecord,
+    LoopRecord,
+    ProductRecord,
+)
 from core.camera_model import PinholeCamera
 from core.field_store import ReflectanceField
 from core.sample_data import panorama_path
 from processing.panorama import Panorama, read_panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import SampleModels
+from render.model_relight import ModelRelightSettings
 from render.relight_mode import RelightEngine, RelightMode, most_accurate_mode, open_relighter
 from render.relighter import Relighter, RelightSettings
 
-__all__ = ["FRAME_BUDGET_MS", "bench_loop", "bench_product", "capture_record"]
+__all__ = [
+    "FRAME_BUDGET_MS",
+    "bench_loop",
+    "bench_product",
+    "capture_record",
+    "interactive_record",
+    "interactive_variant",
+]
 
 #: A frame budget for "interactive": 30 frames per second.
 FRAME_BUDGET_MS = 1000.0 / 30.0
+#: Rows of the exact reference's panorama grid (the default model mode's own).
+REFERENCE_GRID = 64
+#: The yaw of the frame compared with the reference, degrees.
+REFERENCE_YAW = 30.0
 #: The scene of the large loop field.
 _LOOP_SCENE = "glossy-sphere"
 
@@ -94,6 +116,7 @@ def _loop_mode(
         "loop_new_view_ms": loop["loop_new_view_ms"],
         "relight_compute_ms": float(np.median(compute)),
         "frame_budget_ratio": loop["loop_new_lighting_ms"] / FRAME_BUDGET_MS,
+        "error_vs_reference": _error_vs_reference(engine, mode, field, models, courtyard, camera),
     }
     if isinstance(engine, Relighter) and engine._view_field is not None:
         # The memory-bandwidth floor: one read of the view's blended field.
@@ -106,6 +129,55 @@ def _loop_mode(
         flush=True,
     )
     return row
+
+
+def _error_vs_reference(
+    engine: RelightEngine,
+    mode: RelightMode,
+    field: ReflectanceField,
+    models: SampleModels,
+    courtyard: Panorama,
+    camera: PinholeCamera,
+) -> float:
+    """Relative RMSE of the mode's frame against its exact reference's, over covered pixels."""
+    reference_mode = mode.exact_lighting(REFERENCE_GRID)
+    if reference_mode == mode:
+        return 0.0
+    reference = open_relighter(field, reference_mode, models)
+    frames = []
+    for relighter in (engine, reference):
+        relighter.set_lighting(courtyard, yaw_deg=REFERENCE_YAW)
+        relighter.set_view(camera)
+        frames.append(relighter.render())
+    image, truth = frames
+    covered = image.coverage & truth.coverage
+    energy = float(np.mean(truth.rgb[covered] ** 2))
+    difference = float(np.mean((image.rgb[covered] - truth.rgb[covered]) ** 2))
+    return float(np.sqrt(difference / energy)) if energy > 0 else float("nan")
+
+
+def interactive_variant(mode: RelightMode) -> ModelRelightSettings:
+    """The models' interactive mode: ``mode``'s model with precomputed lighting.
+
+    The default mode's own model when it relights through models, else the field's chosen one.
+    """
+    if isinstance(mode, ModelRelightSettings):
+        return replace(mode, lighting="precomputed")
+    return ModelRelightSettings(model="auto", lighting="precomputed")
+
+
+def interactive_record(loop: LoopRecord) -> dict[str, InteractiveRecord]:
+    """The loop's modes keyed by name: the figures the interactive goals are read from."""
+    return {
+        m["mode"]: {
+            "new_lighting_ms": m["loop_new_lighting_ms"],
+            "new_view_ms": m["loop_new_view_ms"],
+            "error_vs_reference": m["error_vs_reference"],
+            "points": loop["points"],
+            "settings": m["settings"],
+        }
+        for m in loop["modes"]
+    }
 
 
 def bench_loop(
@@ -129,9 +201,11 @@ def bench_loop(
     -------
     LoopRecord
     """
+    default = most_accurate_mode(field, models).mode
     modes: dict[str, RelightMode] = {
         "paper": RelightSettings.paper_configuration(CHAIN_K),
-        "default (chosen by held-out lights)": most_accurate_mode(field, models).mode,
+        "default": default,
+        "models, precomputed": interactive_variant(default),
         "sampled, barycentric": k_method("sampled, barycentric", CHAIN_K).mode,
         "models, sampled K=64": k_method("models, sampled", CHAIN_K).mode,
     }

@@ -22,6 +22,7 @@ __all__ = [
     "ConfigRecord",
     "EnvironmentRecord",
     "FieldRecord",
+    "InteractiveRecord",
     "KRow",
     "LoopModeRecord",
     "LoopRecord",
@@ -230,8 +231,23 @@ class LoopModeRecord(TypedDict):
     loop_new_view_ms: float
     relight_compute_ms: float
     frame_budget_ratio: float
+    error_vs_reference: float
     bandwidth_floor_ms: NotRequired[float]
     bandwidth_floor_ratio: NotRequired[float]
+
+
+class InteractiveRecord(TypedDict):
+    """One mode's interactive figures (``results.json``'s ``interactive``, keyed by mode).
+
+    ``error_vs_reference`` is the relative RMSE of a frame against the same predictors with
+    the panorama summed exactly into a 64 x 128 grid (0 for a mode that is its own reference).
+    """
+
+    new_lighting_ms: float
+    new_view_ms: float
+    error_vs_reference: float
+    points: int
+    settings: ModeRecord
 
 
 class LoopRecord(SpecRecord):
@@ -272,4 +288,5 @@ class SuiteResults(TypedDict):
     stability: StabilityRecord
     held_out: NotRequired[list[HeldOutRecord]]
     guard_advice: NotRequired[list[AdviceRecord]]
+    interactive: NotRequired[dict[str, InteractiveRecord]]
     wall_s: float

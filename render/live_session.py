@@ -33,6 +33,7 @@ from processing.environment import EnvironmentLighting
 from processing.panorama import Panorama
 from processing.sampling import SAMPLERS, SamplerName
 from render.guards import relight_warnings
+from render.model_relight import ModelRelighter, ModelRelightSettings
 from render.output import display_picture
 from render.overlay import sample_overlay
 from render.relight_mode import ModeChoice, RelightEngine, RelightMode
@@ -86,6 +87,9 @@ class LiveControls:
     azimuth_deg, inclination_deg : float, the view (fields of points), degrees
     zoom : float, the camera's distance divided by this
     truth : bool, render the ground truth and the error beside the frame (simulated fields)
+    exact : bool, the best mode summed exactly; off, a best mode of models relights through
+        precomputed lighting (:mod:`render.precomputed_lighting`: interactive, a few per cent
+        off on glossy objects), and the viewer refines to the exact sum when the person stops
     """
 
     mode: LiveMode = "best"
@@ -99,6 +103,7 @@ class LiveControls:
     inclination_deg: float = 45.0
     zoom: float = 1.0
     truth: bool = False
+    exact: bool = False
 
     def __post_init__(self) -> None:
         if self.mode not in LIVE_MODES:
@@ -134,7 +139,7 @@ class LiveControls:
     def lighting_key(self) -> tuple[Any, ...]:
         """What the lighting depends on (a change relights)."""
         return (self.mode, self.panorama, self.yaw_deg, self.exposure, self.k, self.sampler,
-                self.modulation)  # fmt: skip
+                self.modulation, self.exact)  # fmt: skip
 
 
 def _control_value(name: str, value: Any) -> Any:
@@ -148,7 +153,7 @@ def _control_value(name: str, value: Any) -> Any:
             if isinstance(value, bool) or int(value) != value:
                 raise TypeError
             return int(value)
-        if name == "truth":
+        if name in ("truth", "exact"):
             if not isinstance(value, bool):
                 raise TypeError
             return value
@@ -331,7 +336,14 @@ class LiveSession:
         mode = self.best.mode
         if mode.sampled_k is not None:
             mode = replace(mode, k=controls.k, sampler=controls.sampler)  # type: ignore[type-var]
+        exact_models = isinstance(mode, ModelRelightSettings) and mode.lighting == "grid"
+        if exact_models and not controls.exact:
+            mode = replace(mode, lighting="precomputed")  # type: ignore[type-var]
         return mode
+
+    def refinable(self, controls: LiveControls) -> bool:
+        """Whether the exact sum would render these controls differently (and slower)."""
+        return self.mode(controls) != self.mode(replace(controls, exact=True))
 
     def camera(self, controls: LiveControls) -> PinholeCamera:
         """The view of the controls (a field of pixels: its own camera)."""
@@ -447,13 +459,25 @@ class LiveSession:
 
     def _engine(self, mode: RelightMode) -> _Engine:
         if mode not in self._engines:
-            models = self.best.models if mode.uses_models else None
-            self._engines[mode] = _Engine(mode, mode.open(self.field, models))
-            # Engines of the paper's mode at other K or samplers hold only their lighting.
-            stale = [m for m in self._engines if m != mode and m != self.best.mode]
+            self._engines[mode] = _Engine(mode, self._open(mode))
+            # Interpolating engines at other K or samplers hold only their lighting; the model
+            # engines (exact and precomputed) hold prepared models and transfer: kept.
+            stale = [m for m in self._engines if m != mode and not m.uses_models]
             for other in stale:
                 del self._engines[other]
         return self._engines[mode]
+
+    def _open(self, mode: RelightMode) -> RelightEngine:
+        """The mode's engine; a model engine shares the models another one prepared."""
+        if isinstance(mode, ModelRelightSettings):
+            for opened in self._engines.values():
+                engine = opened.engine
+                if isinstance(engine, ModelRelighter):
+                    try:
+                        return engine.with_lighting(mode)
+                    except InputError:
+                        continue  # another model or visibility: prepare anew
+        return mode.open(self.field, self.best.models if mode.uses_models else None)
 
     def _exposure(self, controls: LiveControls, image: RelitImage) -> float:
         """The display exposure: set by the first frame under each panorama, then fixed.

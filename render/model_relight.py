@@ -71,6 +71,18 @@ from processing.sample_models import (
     with_geometric_visibility,
 )
 from processing.sampling import SamplerName
+from render.precomputed_lighting import (
+    ALPHAS,
+    BRIGHT_LIGHTS,
+    PanoramaPrefilter,
+    SampleTransfer,
+    lobe_albedo,
+    prefilter_panorama,
+    rotate_sh_yaw,
+    rotate_yaw,
+    sample_transfer,
+    shade_precomputed,
+)
 from render.relighter import Predictor, RelitImage
 from render.splat import SplatPlan, plan_splats, splat
 
@@ -85,10 +97,13 @@ __all__ = [
     "fill_sources",
     "prepare_lighting",
     "relight_models",
+    "viewer_of",
 ]
 
-ModelLightingMode = Literal["sampled", "grid"]
-#: How an environment becomes directional lights: K sampled lights, or a pre-filtered grid.
+ModelLightingMode = Literal["sampled", "grid", "precomputed"]
+#: How an environment lights the models: K sampled lights, a pre-filtered grid summed exactly,
+#: or the grid's sum split into precomputed terms, interactive
+#: (:mod:`render.precomputed_lighting`).
 LIGHTING_MODES: tuple[ModelLightingMode, ...] = get_args(ModelLightingMode)
 Visibility = Literal["auto", "measured", "geometry-outside", "geometry"]
 #: Where the shadow marks come from (point fields): the measured ones only (clamped outside the
@@ -187,6 +202,21 @@ def fill_sources(models: SampleModels, name: str) -> NDArray[np.int64]:
     return identity
 
 
+def viewer_of(
+    models: SampleModels, camera: PinholeCamera
+) -> tuple[NDArray[np.float64], bool, NDArray[np.float64]]:
+    """Where the samples are seen from: (eye, distant, points) for the shading kernels.
+
+    A pixel field is seen from its camera's direction (distant); points from the camera's
+    position, each sample toward it.
+    """
+    points = models.points if models.points is not None else np.zeros((1, 3))
+    if models.kind == "pixels":
+        assert models.view_direction is not None
+        return np.asarray(models.view_direction, dtype=np.float64), True, points
+    return np.asarray(camera.position, dtype=np.float64), False, points
+
+
 def relight_models(
     models: SampleModels,
     choice: ModelChoice,
@@ -214,12 +244,7 @@ def relight_models(
     which = choice.sample_model(p_count)
     out = np.zeros((p_count, 3), dtype=np.float32)
     lights = lighting.lights
-    if models.kind == "pixels":
-        assert models.view_direction is not None
-        eye, distant = models.view_direction, True
-    else:
-        eye, distant = np.asarray(camera.position, dtype=np.float64), False
-    points = models.points if models.points is not None else np.zeros((1, 3))
+    eye, distant, points = viewer_of(models, camera)
     for index, name in enumerate(choice.names):
         samples = np.flatnonzero(mask & (which == index)).astype(np.int64)
         if samples.size == 0:
@@ -260,7 +285,8 @@ def _shade_kernel(
     out: NDArray[np.float32],
 ) -> None:
     # One sample per iteration, every light: the fitted BRDF times the cosine, the
-    # interpolated shadow marks and the light. The sample's own normal, the parameters (and
+    # interpolated shadow marks and the light, added to ``out`` (the precomputed lighting
+    # adds its brightest lights to the rest). The sample's own normal, the parameters (and
     # marks) of its source (itself unless it had no observation).
     for j in numba.prange(samples.shape[0]):
         p = samples[j]
@@ -306,9 +332,9 @@ def _shade_kernel(
                 r += diffuse_r * scale * rgb[d, 0]
                 g += diffuse_g * scale * rgb[d, 1]
                 b += diffuse_b * scale * rgb[d, 2]
-        out[p, 0] = r
-        out[p, 1] = g
-        out[p, 2] = b
+        out[p, 0] += r
+        out[p, 1] += g
+        out[p, 2] += b
 
 
 @dataclass(frozen=True)
@@ -320,13 +346,17 @@ class ModelRelightSettings:
     model : str
         "auto" (the field's model chosen by LOO error), "auto-per-sample" (each sample's), or a
         fitted model's name.
-    lighting : "sampled" (K lights of ``sampler``) or "grid" (pre-filtered panorama blocks)
+    lighting : "sampled" (K lights of ``sampler``), "grid" (pre-filtered panorama blocks, summed
+        exactly) or "precomputed" (the same grid through precomputed transfer, a pre-filtered
+        panorama and a yaw that turns coefficients: a few dot products per sample and lighting,
+        :mod:`render.precomputed_lighting`)
     k, sampler, seed : sampled lighting
     grid_height : rows of the grid lighting (2 x as many columns)
     visibility : one of ``VISIBILITY_MODES`` (pixel fields: always the measured marks)
     spacing : float, optional
         Point spacing for splats and shadow maps (default: the median nearest-neighbour
         distance, :func:`core.point_spacing.point_spacing`).
+    bright_lights : int, precomputed lighting: the most luminous grid blocks summed exactly
     """
 
     model: str = "auto"
@@ -337,6 +367,7 @@ class ModelRelightSettings:
     grid_height: int = 32
     visibility: Visibility = "auto"
     spacing: float | None = None
+    bright_lights: int = BRIGHT_LIGHTS
 
     #: Relights through the field's per-sample models.
     uses_models = True
@@ -352,6 +383,8 @@ class ModelRelightSettings:
             )
         if self.spacing is not None and not self.spacing > 0:
             raise InputError(f"point spacing must be positive, got {self.spacing}")
+        if self.bright_lights < 0:
+            raise InputError(f"bright lights must be 0 or more, got {self.bright_lights}")
 
     @property
     def sampled_k(self) -> int | None:
@@ -366,6 +399,12 @@ class ModelRelightSettings:
         modulation: NDArray[np.floating] | None = None,
     ) -> LightingControls:
         """The lighting this mode takes from a panorama under the user's controls."""
+        if self.lighting == "precomputed":
+            # The engine turns and scales its pre-filtered panorama itself; the controls carry
+            # the yaw and exposure for the panorama as shown.
+            return LightingControls(
+                lighting="panorama", modulation=modulation, yaw_deg=yaw_deg, exposure=exposure
+            )
         if self.lighting == "grid":
             return LightingControls(
                 lighting="grid",
@@ -396,7 +435,9 @@ class ModelRelightSettings:
     def describe(self, models: SampleModels | None = None) -> str:
         """A short name for reports (the chosen model's name when the fit is given)."""
         name = self.model if models is None else choose_model(models).chosen
-        lights = f"grid {self.grid_height}" if self.lighting == "grid" else f"K={self.k}"
+        lights = {"grid": f"grid {self.grid_height}", "precomputed": "precomputed"}.get(
+            self.lighting, f"K={self.k}"
+        )
         return f"model {name}, {lights}"
 
     def open(
@@ -470,6 +511,14 @@ class ModelRelighter:
         self._lighting: ModelLighting | None = None
         self._environment: EnvironmentLighting | None = None
         self._view: tuple[PinholeCamera, SplatPlan | None, NDArray[np.bool_]] | None = None
+        # Precomputed lighting: the pre-filtered panorama (the last one, by identity), the yaw
+        # and exposure in force, the samples' transfer (per model, made on first use) and the
+        # panorama as shown, adjusted only when asked for.
+        self._prefilter: tuple[Panorama, PanoramaPrefilter] | None = None
+        self._precomputed: tuple[PanoramaPrefilter, float, float] | None = None
+        self._transfers: dict[str, SampleTransfer] = {}
+        self._shown: tuple[Panorama, LightingControls] | None = None
+        self._bright: ModelLighting | None = None
 
     def _visibility_mode(self) -> Visibility:
         """The shadow marks to use: the setting, or for "auto" the better predictor."""
@@ -494,6 +543,8 @@ class ModelRelighter:
     @property
     def environment(self) -> EnvironmentLighting | None:
         """The current lighting: the panorama as relit (yaw, exposure) and its lights."""
+        if self._environment is None and self._shown is not None:
+            self._environment = light_environment(*self._shown)
         return self._environment
 
     def set_lighting(
@@ -509,13 +560,41 @@ class ModelRelighter:
         controls = self.settings.lighting_controls(
             yaw_deg=yaw_deg, exposure=exposure, modulation=modulation
         )
-        self.set_environment(light_environment(panorama, controls))
+        if self.settings.lighting == "precomputed":
+            self._precompute(self._prefiltered(panorama), yaw_deg, exposure)
+            self._environment, self._shown = None, (panorama, controls)
+        else:
+            self.set_environment(light_environment(panorama, controls))
         return time.perf_counter() - start
 
     def set_environment(self, lighting: EnvironmentLighting) -> None:
         """Prepare the lights of a lighting (from :func:`light_environment`)."""
-        self.set_lights(lighting.light_set())
-        self._environment = lighting
+        if self.settings.lighting == "precomputed":
+            self._precompute(self._prefiltered(lighting.panorama), 0.0, 1.0)
+        else:
+            self.set_lights(lighting.light_set())
+        self._environment, self._shown = lighting, None
+
+    def _prefiltered(self, panorama: Panorama) -> PanoramaPrefilter:
+        """The panorama pre-filtered (about a second), reused while the same one lights."""
+        if self._prefilter is None or self._prefilter[0] is not panorama:
+            prefilter = prefilter_panorama(panorama.rgb, self.settings.bright_lights)
+            self._prefilter = (panorama, prefilter)
+        return self._prefilter[1]
+
+    def _precompute(self, prefilter: PanoramaPrefilter, yaw_deg: float, exposure: float) -> None:
+        # The grid lights turned by the yaw: the exact grid of the turned panorama, for the
+        # linear bases and the share of light from outside the measured region.
+        grid = prefilter.lights
+        lights = LightSet(
+            rotate_yaw(grid.directions, yaw_deg), grid.rgb * exposure, grid.solid_angle_sr
+        )
+        self._lighting = prepare_lighting(self.models, lights)
+        bright = prefilter.bright
+        self._bright = prepare_lighting(
+            self.models, LightSet(rotate_yaw(bright.directions, yaw_deg), bright.rgb * exposure)
+        )
+        self._precomputed = (prefilter, yaw_deg, exposure)
 
     def with_lighting(self, settings: ModelRelightSettings) -> ModelRelighter:
         """A copy of this relighter with other lighting settings, sharing its prepared models.
@@ -533,13 +612,17 @@ class ModelRelighter:
         other = copy.copy(self)
         other.settings = settings
         other._lighting = None
-        other._environment = None
+        other._environment, other._shown, other._precomputed = None, None, None
+        other._transfers = {}
         return other
 
     def set_lights(self, lights: LightSet) -> None:
-        """Light with given directional lights instead of a panorama (hold-out tests)."""
+        """Light with given directional lights instead of a panorama (hold-out tests).
+
+        Summed exactly, whatever the lighting setting (there is no panorama to pre-filter).
+        """
         self._lighting = prepare_lighting(self.models, lights)
-        self._environment = None
+        self._environment, self._shown, self._precomputed = None, None, None
 
     def set_view(self, camera: PinholeCamera) -> float:
         """Plan the splats of a view (point fields); returns the seconds it took."""
@@ -560,15 +643,67 @@ class ModelRelighter:
             self._view = (camera, plan, plan.visible)
         return time.perf_counter() - start
 
+    def _transfer(self, name: str, fit: ParametricFit) -> SampleTransfer:
+        if name not in self._transfers:
+            m = self.models
+            marks = m.mark_directions if m.mark_directions is not None else m.light_directions
+            self._transfers[name] = sample_transfer(
+                fit.normals, self._sources[name], fit.lit, marks,
+                m.camera_frame[2] if m.kind == "pixels" else None,
+            )  # fmt: skip
+        return self._transfers[name]
+
+    def _relight_precomputed(
+        self, lighting: ModelLighting, camera: PinholeCamera, needed: NDArray[np.bool_]
+    ) -> NDArray[np.float32]:
+        """:func:`relight_models` with the grid's sum split into precomputed terms."""
+        assert self._precomputed is not None
+        prefilter, yaw_deg, exposure = self._precomputed
+        light_sh = rotate_sh_yaw(prefilter.sh, yaw_deg) * exposure
+        p_count = self.models.sample_count
+        which = self.choice.sample_model(p_count)
+        out = np.zeros((p_count, 3), dtype=np.float32)
+        eye, distant, points = viewer_of(self.models, camera)
+        for index, name in enumerate(self.choice.names):
+            samples = np.flatnonzero(needed & (which == index)).astype(np.int64)
+            fit = self.models.fit(name)
+            if samples.size == 0:
+                continue
+            if isinstance(fit, BasisFit):
+                out[samples] = np.einsum(
+                    "pbc,bc->pc", fit.coefficients[samples], lighting.basis[name]
+                ).astype(np.float32)
+                continue
+            transfer = self._transfer(name, fit)
+            assert self._bright is not None
+            bright = self._bright
+            shade_precomputed(
+                samples, self._sources[name], fit.normals, fit.rho_d, fit.f0, fit.alpha,
+                points, eye, distant, name == "lambert+ggx", transfer.diffuse,
+                transfer.visibility, light_sh, prefilter.specular, np.asarray(ALPHAS),
+                lobe_albedo(), math.radians(yaw_deg), exposure, out,
+            )  # fmt: skip
+            _shade_kernel(
+                samples, self._sources[name], fit.normals, fit.rho_d, fit.f0, fit.alpha, fit.lit,
+                points, eye, distant, name == "lambert+ggx", bright.lights.directions,
+                bright.lights.rgb, bright.visibility_indices, bright.visibility_weights,
+                bright.reaches, out,
+            )  # fmt: skip
+        return out
+
     def render(self) -> RelitImage:
         """Relight the current view under the current lighting."""
         if self._lighting is None or self._view is None:
             raise InputError("set a lighting and a view before rendering")
         camera, plan, needed = self._view
         start = time.perf_counter()
-        radiance = relight_models(
-            self.models, self.choice, self._lighting, camera, needed=needed, sources=self._sources
-        )
+        if self._precomputed is not None:
+            radiance = self._relight_precomputed(self._lighting, camera, needed)
+        else:
+            radiance = relight_models(
+                self.models, self.choice, self._lighting, camera, needed=needed,
+                sources=self._sources,
+            )  # fmt: skip
         relit = time.perf_counter()
         if plan is None:
             assert self.field.image_shape is not None

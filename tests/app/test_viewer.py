@@ -120,7 +120,7 @@ def test_dragging_the_panorama_half_a_turn_relights_as_the_model_says(
     errors: list[str] = []
     page.on("pageerror", lambda error: errors.append(str(error)))
     page.goto(server.url)
-    _wait_frame(page, "state.meta.controls.yaw_deg === 0")
+    _wait_frame(page, "state.meta.controls.yaw_deg === 0 && state.meta.controls.exact")
     before = _shown(page, "#frame", "yaw-0")
     page.screenshot(path=str(ARTIFACTS / "viewer" / "page-yaw-0.png"))
     assert before.shape == (SIZE, SIZE, 3)
@@ -131,7 +131,8 @@ def test_dragging_the_panorama_half_a_turn_relights_as_the_model_says(
     page.mouse.down()
     page.mouse.move(box["x"] + 20 + box["width"] / 2, middle, steps=8)
     page.mouse.up()
-    _wait_frame(page, "state.meta.controls.yaw_deg === -180")
+    # The drag's frames are precomputed; once it stops, the exact sum follows.
+    _wait_frame(page, "state.meta.controls.yaw_deg === -180 && state.meta.controls.exact")
     after = _shown(page, "#frame", "yaw-180")
     page.screenshot(path=str(ARTIFACTS / "viewer" / "page-yaw-180.png"))
     assert page.inner_text("#yaw-value") == "-180°"
@@ -139,7 +140,7 @@ def test_dragging_the_panorama_half_a_turn_relights_as_the_model_says(
     # What the model says, computed here without the session: the best mode's engine at
     # yaw 180, shown at the session's display exposure.
     frame = session.frame
-    assert frame is not None and frame.controls.yaw_deg == -180.0
+    assert frame is not None and frame.controls.yaw_deg == -180.0 and frame.controls.exact
     engine = open_relighter(session.field, session.best.mode, session.best.models)
     engine.set_lighting(session.panoramas["courtyard.exr"], yaw_deg=180.0)
     engine.set_view(frame.camera)
