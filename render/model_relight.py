@@ -51,6 +51,7 @@ from scipy.spatial import cKDTree
 from core.brdf import specular_lobe
 from core.camera_model import PinholeCamera
 from core.colour import REC709_LUMINANCE
+from core.directions import panorama_directions, panorama_pixel_index
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
@@ -81,6 +82,7 @@ from render.precomputed_lighting import (
     rotate_sh_yaw,
     rotate_yaw,
     sample_transfer,
+    sh_norms,
     shade_precomputed,
 )
 from render.relighter import Predictor, RelitImage
@@ -113,6 +115,9 @@ VISIBILITY_MODES: tuple[Visibility, ...] = get_args(Visibility)
 #: "auto" trusts the geometry when its mark error plus the floor is below this share of
 #: interpolation's (the floor keeps unshadowed objects, where both are ~0, on measured marks).
 GEOMETRY_MARGIN, GEOMETRY_FLOOR = 0.9, 1e-3
+#: Rows of the map of the measured region that precomputed lighting reads the share of light
+#: from outside it off (2 x as many columns; 1.4 degrees a pixel).
+OUTSIDE_MAP_HEIGHT = 128
 
 
 @dataclass(frozen=True)
@@ -519,6 +524,7 @@ class ModelRelighter:
         self._transfers: dict[str, SampleTransfer] = {}
         self._shown: tuple[Panorama, LightingControls] | None = None
         self._bright: ModelLighting | None = None
+        self._outside: NDArray[np.bool_] | None = None
 
     def _visibility_mode(self) -> Visibility:
         """The shadow marks to use: the setting, or for "auto" the better predictor."""
@@ -583,18 +589,43 @@ class ModelRelighter:
         return self._prefilter[1]
 
     def _precompute(self, prefilter: PanoramaPrefilter, yaw_deg: float, exposure: float) -> None:
-        # The grid lights turned by the yaw: the exact grid of the turned panorama, for the
-        # linear bases and the share of light from outside the measured region.
+        # The grid lights turned by the yaw are the exact grid of the turned panorama: the
+        # linear bases sum over them (prepared in full only when a basis model is chosen), and
+        # the share of light from outside the measured region is read off a map of the region.
         grid = prefilter.lights
         lights = LightSet(
             rotate_yaw(grid.directions, yaw_deg), grid.rgb * exposure, grid.solid_angle_sr
         )
-        self._lighting = prepare_lighting(self.models, lights)
+        if any(isinstance(self.models.fits[n], BasisFit) for n in self.choice.names):
+            self._lighting = prepare_lighting(self.models, lights)
+        else:
+            self._lighting = ModelLighting(
+                lights=lights,
+                visibility_indices=np.zeros((0, 3), np.int64),
+                visibility_weights=np.zeros((0, 3)),
+                reaches=np.ones(len(lights.directions), dtype=bool),
+                basis={},
+                outside_fraction=self._outside_share(lights),
+            )
         bright = prefilter.bright
         self._bright = prepare_lighting(
             self.models, LightSet(rotate_yaw(bright.directions, yaw_deg), bright.rgb * exposure)
         )
         self._precomputed = (prefilter, yaw_deg, exposure)
+
+    def _outside_share(self, lights: LightSet) -> float:
+        """Share of the lights' luminous energy from outside the measured region."""
+        if self._outside is None:
+            rows = OUTSIDE_MAP_HEIGHT
+            directions = panorama_directions(rows, 2 * rows).reshape(-1, 3)
+            weights = interpolation_weights(
+                self.models.light_directions, directions, "barycentric", policy="clamp"
+            )
+            self._outside = weights.outside.reshape(rows, 2 * rows)
+        rows_of, cols_of = panorama_pixel_index(lights.directions, *self._outside.shape)
+        luma = lights.rgb @ REC709_LUMINANCE.astype(np.float64)
+        total = float(luma.sum())
+        return float(luma[self._outside[rows_of, cols_of]].sum()) / total if total > 0 else 0.0
 
     def with_lighting(self, settings: ModelRelightSettings) -> ModelRelighter:
         """A copy of this relighter with other lighting settings, sharing its prepared models.
@@ -681,7 +712,7 @@ class ModelRelighter:
                 samples, self._sources[name], fit.normals, fit.rho_d, fit.f0, fit.alpha,
                 points, eye, distant, name == "lambert+ggx", transfer.diffuse,
                 transfer.visibility, light_sh, prefilter.specular, np.asarray(ALPHAS),
-                lobe_albedo(), math.radians(yaw_deg), exposure, out,
+                lobe_albedo(), sh_norms(), math.radians(yaw_deg), exposure, out,
             )  # fmt: skip
             _shade_kernel(
                 samples, self._sources[name], fit.normals, fit.rho_d, fit.f0, fit.alpha, fit.lit,

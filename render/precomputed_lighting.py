@@ -52,6 +52,7 @@ __all__ = [
     "rotate_yaw",
     "sample_transfer",
     "sh_basis",
+    "sh_norms",
     "shade_precomputed",
 ]
 
@@ -74,11 +75,28 @@ BLOCK = 512
 BRIGHT_LIGHTS = 32
 
 
+@lru_cache(maxsize=4)
+def sh_norms(bands: int = BANDS) -> NDArray[np.float64]:
+    """K_lm = sqrt((2l + 1) / 4 pi (l - m)! / (l + m)!), times sqrt 2 for m > 0; (bands, bands)."""
+    norms = np.zeros((bands, bands))
+    for degree in range(bands):
+        for m in range(degree + 1):
+            ratio = math.factorial(degree - m) / math.factorial(degree + m)
+            norms[degree, m] = math.sqrt((2 * degree + 1) / (4 * math.pi) * ratio)
+            if m > 0:
+                norms[degree, m] *= math.sqrt(2.0)
+    return norms
+
+
 @numba.njit(cache=True, inline="always")
-def _sh_eval(x: float, y: float, z: float, bands: int, out: NDArray[np.float64]) -> None:
+def _sh_eval(
+    x: float, y: float, z: float, norms: NDArray[np.float64], out: NDArray[np.float64]
+) -> None:
     # Real spherical harmonics Y_lm at a unit direction, index l (l + 1) + m: associated
     # Legendre functions by the standard recurrences in cos(theta) = z, with sin^m(theta)
-    # cos(m phi) and sin^m(theta) sin(m phi) by the recurrence of complex powers of x + iy.
+    # cos(m phi) and sin^m(theta) sin(m phi) by the recurrence of complex powers of x + iy;
+    # ``norms`` from :func:`sh_norms`.
+    bands = norms.shape[0]
     c_m, s_m = 1.0, 0.0  # sin^m(theta) (cos m phi, sin m phi)
     p_mm = 1.0  # P_m^m / sin^m(theta), with the Condon-Shortley sign
     for m in range(bands):
@@ -97,22 +115,20 @@ def _sh_eval(x: float, y: float, z: float, bands: int, out: NDArray[np.float64])
                 )
             if degree > m:
                 p_prev2, p_prev = p_prev, p
-            ratio = 1.0
-            for k in range(degree - m + 1, degree + m + 1):
-                ratio /= k
-            norm = math.sqrt((2.0 * degree + 1.0) / (4.0 * math.pi) * ratio)
             centre = degree * (degree + 1)
             if m == 0:
-                out[centre] = norm * p
+                out[centre] = norms[degree, 0] * p
             else:
-                out[centre + m] = math.sqrt(2.0) * norm * p * c_m
-                out[centre - m] = math.sqrt(2.0) * norm * p * s_m
+                out[centre + m] = norms[degree, m] * p * c_m
+                out[centre - m] = norms[degree, m] * p * s_m
 
 
 @numba.njit(cache=True, parallel=True)
-def _sh_rows(directions: NDArray[np.float64], bands: int, out: NDArray[np.float64]) -> None:
+def _sh_rows(
+    directions: NDArray[np.float64], norms: NDArray[np.float64], out: NDArray[np.float64]
+) -> None:
     for i in numba.prange(directions.shape[0]):
-        _sh_eval(directions[i, 0], directions[i, 1], directions[i, 2], bands, out[i])
+        _sh_eval(directions[i, 0], directions[i, 1], directions[i, 2], norms, out[i])
 
 
 def sh_basis(directions: NDArray[np.floating], bands: int = BANDS) -> NDArray[np.float64]:
@@ -134,7 +150,7 @@ def sh_basis(directions: NDArray[np.floating], bands: int = BANDS) -> NDArray[np
     if bands < 1:
         raise InputError(f"bands must be at least 1, got {bands}")
     out = np.zeros((len(d), bands * bands))
-    _sh_rows(d, bands, out)
+    _sh_rows(d, sh_norms(bands), out)
     return out
 
 
@@ -422,6 +438,7 @@ def shade_precomputed(
     specular: NDArray[np.float32],
     alphas: NDArray[np.float64],
     albedo: NDArray[np.float64],
+    norms: NDArray[np.float64],
     yaw: float,
     exposure: float,
     out: NDArray[np.float32],
@@ -430,10 +447,9 @@ def shade_precomputed(
 
     ``light_sh`` is the panorama's harmonics already turned by the yaw and scaled by the
     exposure; ``specular`` the pre-filtered maps at yaw 0 (``yaw`` in radians turns the lookup,
-    ``exposure`` scales it); ``albedo`` is :func:`lobe_albedo`.
+    ``exposure`` scales it); ``albedo`` is :func:`lobe_albedo`, ``norms`` :func:`sh_norms`.
     """
     bands2 = light_sh.shape[0]
-    bands = int(math.sqrt(bands2) + 0.5)
     n_cos = albedo.shape[1]
     height, width = specular.shape[1], specular.shape[2]
     blocks = (samples.shape[0] + BLOCK - 1) // BLOCK
@@ -472,7 +488,7 @@ def shade_precomputed(
             rx, ry, rz = nx + lean * (rx - nx), ny + lean * (ry - ny), nz + lean * (rz - nz)
             length = math.sqrt(rx * rx + ry * ry + rz * rz)
             rx, ry, rz = rx / length, ry / length, rz / length
-            _sh_eval(rx, ry, rz, bands, basis)
+            _sh_eval(rx, ry, rz, norms, basis)
             seen = 0.0
             for b in range(bands2):
                 seen += visibility[p, b] * basis[b]

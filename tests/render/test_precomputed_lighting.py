@@ -65,7 +65,11 @@ def _render(field: ReflectanceField, lighting: str, panorama: Panorama, yaw: flo
     engine.set_view(PinholeCamera(20.0, 45.0, width=64, height=64))
     engine.set_lighting(panorama, yaw_deg=yaw)
     image = engine.render()
+    _outside[lighting, yaw] = image.outside_fraction
     return image.radiance[image.needed]
+
+
+_outside: dict[tuple[str, float], float] = {}
 
 
 def test_precomputed_lighting_follows_the_exact_sum_and_turns_with_the_yaw(
@@ -78,6 +82,8 @@ def test_precomputed_lighting_follows_the_exact_sum_and_turns_with_the_yaw(
         error = np.sqrt(np.mean((fast - exact) ** 2) / np.mean(exact**2))
         # The split sum errs at grazing views (docs/relighting.md): a few per cent here.
         assert error < 0.12, f"yaw {yaw}: {error:.3f}"
+        # The share of light from outside the measured lights, read off a map of the region.
+        assert _outside["precomputed", yaw] == pytest.approx(_outside["grid", yaw], abs=0.01)
     # A yaw of the controls is the same lighting as the panorama turned beforehand.
     turned = adjust_panorama(panorama, yaw_deg=100.0)
     direct = _render(glossy, "precomputed", turned, 0.0)
