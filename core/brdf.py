@@ -26,7 +26,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["brdf", "ggx_distribution", "smith_g1", "specular_lobe"]
+__all__ = ["brdf", "ggx_distribution", "smith_g1", "specular_lobe", "toward_eye"]
 
 
 def ggx_distribution(cos_h: ArrayLike, alpha: ArrayLike) -> NDArray[np.float64]:
@@ -98,3 +98,19 @@ def specular_lobe(cos_i: float, cos_o: float, cos_h: float, alpha: float) -> flo
     g1_i = 2.0 * cos_i / (cos_i + math.sqrt(a2 + (1.0 - a2) * cos_i * cos_i))
     g1_o = 2.0 * cos_o / (cos_o + math.sqrt(a2 + (1.0 - a2) * cos_o * cos_o))
     return a2 / (math.pi * t * t) * g1_i * g1_o / (4.0 * cos_i * cos_o)
+
+
+@numba.njit(cache=True, inline="always")
+def toward_eye(
+    points: NDArray[np.float64], p: int, eye: NDArray[np.float64], distant: bool
+) -> tuple[float, float, float]:
+    """Unit direction from sample ``p`` toward the eye, for the shading kernels.
+
+    ``distant``: ``eye`` is that direction already (a pixel field's camera); else the eye's
+    position, and the direction is from ``points[p]`` to it.
+    """
+    if distant:
+        return eye[0], eye[1], eye[2]
+    vx, vy, vz = eye[0] - points[p, 0], eye[1] - points[p, 1], eye[2] - points[p, 2]
+    length = math.sqrt(vx * vx + vy * vy + vz * vz)
+    return vx / length, vy / length, vz / length

@@ -32,7 +32,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from core.brdf import specular_lobe
+from core.brdf import specular_lobe, toward_eye
 from core.colour import REC709_LUMINANCE
 from core.directions import panorama_directions, panorama_solid_angles
 from core.errors import InputError
@@ -459,12 +459,7 @@ def shade_precomputed(
             p = samples[j]
             q = source[p]
             nx, ny, nz = normals[p, 0], normals[p, 1], normals[p, 2]
-            if distant:
-                vx, vy, vz = eye[0], eye[1], eye[2]
-            else:
-                vx, vy, vz = eye[0] - points[p, 0], eye[1] - points[p, 1], eye[2] - points[p, 2]
-                length = math.sqrt(vx * vx + vy * vy + vz * vz)
-                vx, vy, vz = vx / length, vy / length, vz / length
+            vx, vy, vz = toward_eye(points, p, eye, distant)
             cos_o = nx * vx + ny * vy + nz * vz
             if cos_o <= 0.0:
                 continue
