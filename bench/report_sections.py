@@ -118,7 +118,10 @@ def _section_product(results: SuiteResults) -> list[str]:
             f"points, {loop['image']} px view): time per new lighting (preparing the lighting and "
             "rendering) as a share of a 30 fps frame, and, for the interpolating engines, the "
             "relighting compute against its floor, one read of the view's blended field at the "
-            f"measured copy bandwidth ({loop['copy_bandwidth_GBps']:.1f} GB/s):",
+            f"measured copy bandwidth ({loop['copy_bandwidth_GBps']:.1f} GB/s); the error of a "
+            "frame against the same predictors with the panorama summed exactly (64 x 128), "
+            "the price of each mode's lighting approximation (`default` is its own reference; "
+            "`models, precomputed` is its interactive variant):",
             "",
         ]
         base = loop["modes"][0]
@@ -130,6 +133,7 @@ def _section_product(results: SuiteResults) -> list[str]:
                 "vs paper",
                 "relight compute",
                 "vs bandwidth floor",
+                "error vs exact reference",
             ],
             [
                 [
@@ -139,6 +143,7 @@ def _section_product(results: SuiteResults) -> list[str]:
                     ratio(m["loop_new_lighting_ms"], base["loop_new_lighting_ms"]),
                     f"{m['relight_compute_ms']:.1f} ms" if "relight_compute_ms" in m else "-",
                     f"{m['bandwidth_floor_ratio']:.1f}x" if "bandwidth_floor_ratio" in m else "-",
+                    f"{m['error_vs_reference']:.2%}" if "error_vs_reference" in m else "-",
                 ]
                 for m in loop["modes"]
             ],

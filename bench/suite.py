@@ -194,7 +194,7 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
         "peak_rss_MB": _max_rss_kib() / 1024,
         "rss_growth_MB": (_max_rss_kib() - rss_start) / 1024,
     }
-    results: SuiteResults = {
+    return {
         "config": config_record(config),
         "machine": at_end,
         "chain_field": list(config.chain_field),
@@ -213,11 +213,9 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
         "stability": stability,
         "held_out": held_out,
         "guard_advice": guard_advice,
+        "interactive": interactive_record(product["loop"]) if "loop" in product else {},
         "wall_s": time.perf_counter() - started,
     }
-    if "loop" in product:
-        results["interactive"] = interactive_record(product["loop"])
-    return results
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -269,7 +269,8 @@ class SuiteResults(TypedDict):
     """The whole of ``results.json``.
 
     ``chain`` lists the ablation chain's labels in order; ``ssim`` and ``memory`` say how
-    those figures are measured; ``wall_s`` is the run's duration.
+    those figures are measured; ``interactive`` is the loop's modes keyed by name (empty
+    without the loop); ``wall_s`` is the run's duration.
     """
 
     config: ConfigRecord
@@ -288,5 +289,5 @@ class SuiteResults(TypedDict):
     stability: StabilityRecord
     held_out: NotRequired[list[HeldOutRecord]]
     guard_advice: NotRequired[list[AdviceRecord]]
-    interactive: NotRequired[dict[str, InteractiveRecord]]
+    interactive: dict[str, InteractiveRecord]
     wall_s: float
