@@ -36,6 +36,7 @@ import contextlib
 import json
 import tempfile
 import threading
+import traceback
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from importlib import resources
@@ -257,7 +258,21 @@ async def _live(request: web.Request) -> web.WebSocketResponse:
                         "ms": round(truth.seconds * 1000.0, 2),
                     })  # fmt: skip
 
-    task = asyncio.create_task(render_loop())
+    async def serve_frames() -> None:
+        try:
+            await render_loop()
+        except ConnectionError:
+            pass  # the page went away mid-frame
+        except Exception as error:
+            # A fault of ours, not of the controls (those are RigErrors, answered above): the
+            # server's log gets the traceback, the page the reason, and the socket closes so the
+            # page says it is disconnected rather than freezing.
+            traceback.print_exc()
+            with contextlib.suppress(ConnectionError):
+                await socket.send_json({"type": "error", "message": f"internal error: {error}"})
+                await socket.close()
+
+    task = asyncio.create_task(serve_frames())
     try:
         async for message in socket:
             if message.type != WSMsgType.TEXT:

@@ -9,6 +9,7 @@ installs one (``.ci/run``).
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import shutil
@@ -18,6 +19,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import aiohttp
 import cv2
 import numpy as np
 import pytest
@@ -228,3 +230,26 @@ def test_view_refuses_a_field_that_is_not_there(
 ) -> None:
     assert main(["view", str(tmp_path / "missing.zarr")]) == 2
     assert "missing.zarr" in capsys.readouterr().err
+
+
+def test_a_fault_in_rendering_reaches_the_page_and_closes_its_socket(
+    viewer: tuple[ViewerServer, LiveSession], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    server, session = viewer
+
+    def broken(controls: object) -> None:
+        raise RuntimeError("the kernel broke")
+
+    monkeypatch.setattr(session, "render", broken)
+
+    async def talk() -> list[Any]:
+        async with (
+            aiohttp.ClientSession() as client,
+            client.ws_connect(server.url + "api/live") as socket,
+        ):
+            await socket.send_json({"controls": {"yaw_deg": 5.0}})
+            return [message async for message in socket]
+
+    messages = asyncio.run(asyncio.wait_for(talk(), 30.0))
+    texts = [json.loads(m.data) for m in messages if m.type == aiohttp.WSMsgType.TEXT]
+    assert texts == [{"type": "error", "message": "internal error: the kernel broke"}]
