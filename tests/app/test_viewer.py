@@ -16,6 +16,7 @@ import shutil
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -250,6 +251,8 @@ def test_a_fault_in_rendering_reaches_the_page_and_closes_its_socket(
             await socket.send_json({"controls": {"yaw_deg": 5.0}})
             return [message async for message in socket]
 
-    messages = asyncio.run(asyncio.wait_for(talk(), 30.0))
+    # On a thread of its own: Playwright's sync API keeps an event loop on this one.
+    with ThreadPoolExecutor(max_workers=1) as thread:
+        messages = thread.submit(lambda: asyncio.run(asyncio.wait_for(talk(), 30.0))).result()
     texts = [json.loads(m.data) for m in messages if m.type == aiohttp.WSMsgType.TEXT]
     assert texts == [{"type": "error", "message": "internal error: the kernel broke"}]
