@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 from core.atomic import output_problem
@@ -23,6 +24,7 @@ __all__ = [
     "count",
     "finite",
     "image_size",
+    "names_among",
     "non_negative",
     "output_directory",
     "output_file",
@@ -92,6 +94,18 @@ def whole(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be zero or more, got {text!r}")
     return value
+
+
+def names_among(text: str, allowed: Sequence[str], what: str) -> tuple[str, ...]:
+    """A comma-separated list of distinct names among ``allowed`` (the body of a list type)."""
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = [name for name in names if name not in allowed]
+    if unknown or not names or len(set(names)) != len(names):
+        problem = f"unknown {what} {', '.join(unknown)}" if unknown else f"{text!r}"
+        raise argparse.ArgumentTypeError(
+            f"{problem}: give distinct {what}s among {', '.join(allowed)}"
+        )
+    return names
 
 
 def quality(text: str) -> int:

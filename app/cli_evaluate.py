@@ -11,7 +11,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import output_file, require_output
+from app.cli_args import names_among, output_file, require_output
 from core.errors import InputError
 
 __all__ = ["add_evaluate", "add_transfer_option", "relight_lights"]
@@ -68,13 +68,7 @@ def add_evaluate(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
 def _methods(text: str) -> tuple[str, ...]:
     from render.light_prediction import PREDICTORS
 
-    names = tuple(name.strip() for name in text.split(",") if name.strip())
-    unknown = [name for name in names if name not in PREDICTORS]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(
-            f"unknown method(s) {', '.join(unknown) or text!r}; use {', '.join(PREDICTORS)}"
-        )
-    return names
+    return names_among(text, PREDICTORS, "method")
 
 
 def _read_mask(path: Path, shape: tuple[int, int] | None) -> Any:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from app.cli_args import count, output_directory, quality, whole
+from app.cli_args import count, names_among, output_directory, quality, whole
 from app.cli_evaluate import add_transfer_option
 
 __all__ = ["add_export_web"]
@@ -63,13 +63,7 @@ def add_export_web(commands: argparse._SubParsersAction[argparse.ArgumentParser]
 def _models(text: str) -> tuple[str, ...]:
     from render.web_export import WEB_MODELS
 
-    names = tuple(name.strip() for name in text.split(",") if name.strip())
-    unknown = [name for name in names if name not in WEB_MODELS]
-    if unknown or not names or len(set(names)) != len(names):
-        raise argparse.ArgumentTypeError(
-            f"{text!r}: give distinct models among {', '.join(WEB_MODELS)}"
-        )
-    return names
+    return names_among(text, WEB_MODELS, "model")
 
 
 def _run_export_web(args: argparse.Namespace) -> int:

@@ -137,9 +137,13 @@ class LiveControls:
         return asdict(self)
 
     def lighting_key(self) -> tuple[Any, ...]:
-        """What the lighting depends on (a change relights)."""
+        """What the lighting depends on (a change relights).
+
+        ``exact`` is not part of it: it picks another engine, and the panorama as lit and the
+        warnings are the same for the exact frame that refines an interactive one.
+        """
         return (self.mode, self.panorama, self.yaw_deg, self.exposure, self.k, self.sampler,
-                self.modulation, self.exact)  # fmt: skip
+                self.modulation)  # fmt: skip
 
 
 def _control_value(name: str, value: Any) -> Any:
