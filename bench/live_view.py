@@ -3,8 +3,9 @@
 ``python -m bench.live_view -o DIR [--points 50000] [--grid 16] [--size 512]`` simulates a glossy
 sphere (``--grid`` lights x cameras), opens :class:`render.live_session.LiveSession` on it and
 times, for the paper's configuration and the field's best mode, a new lighting (a yaw change:
-lighting, relight and display), a new view (an orbit), the JPEG encoding of a frame and the
-guards' warnings; medians of five changes each. Writes ``live_view.json`` and prints it.
+lighting, relight and display), a new view (an orbit) with its splat plan and camera blend
+timed apart, the JPEG encoding of a frame and the guards' warnings; medians of five changes
+each. Writes ``live_view.json`` and prints it.
 """
 
 from __future__ import annotations
@@ -19,10 +20,14 @@ import numpy as np
 
 from core.field_store import ReflectanceField
 from core.image_io import encode_picture
+from core.point_spacing import point_spacing
 from core.sample_data import panorama_path
 from processing.panorama import read_panorama
-from render.live_session import LIVE_MODES, LiveSession
+from render.live_session import LIVE_MODES, LiveFrame, LiveSession
+from render.relight import blend_cameras
 from render.relight_mode import most_accurate_mode
+from render.relighter import RelightSettings
+from render.splat import plan_splats
 from sim.field import field_cameras, simulate_field
 
 __all__ = ["main", "time_session"]
@@ -56,17 +61,42 @@ def time_session(session: LiveSession) -> dict[str, dict[str, Any]]:
         start = time.perf_counter()
         session.warnings()
         warnings = time.perf_counter() - start
+        plan, blend = view_parts(session, frame)
         figures[mode] = {
             "mode": frame.mode,
             "new_lighting_ms": 1000.0 * float(np.median(lighting)),
             "new_view_ms": 1000.0 * float(np.median(view)),
             "parts_of_last_view_ms": {k: 1000.0 * v for k, v in frame.seconds.items()},
+            "splat_plan_ms": plan,
+            "camera_blend_ms": blend,
             "jpeg_ms": 1000.0 * encode,
             "jpeg_kib": len(jpeg) / 1024.0,
             "warnings_ms": 1000.0 * warnings,
             "points_shown": int(frame.image.needed.sum()),
         }
     return figures
+
+
+def view_parts(session: LiveSession, frame: LiveFrame) -> tuple[float, float | None]:
+    """Median milliseconds of the splat plan and the camera blend of the frame's view.
+
+    The two parts of a new view that do not depend on the lighting; the blend only for modes
+    that interpolate the cameras (the models hold the view in their lobes).
+    """
+    field, camera = session.field, frame.camera
+    assert field.points is not None and field.normals is not None
+    spacing = point_spacing(field.points)
+    plans, blends = [], []
+    for _ in range(REPEATS):
+        start = time.perf_counter()
+        plan = plan_splats(field.points, field.normals, camera, spacing)
+        plans.append(time.perf_counter() - start)
+        if isinstance(frame.relight_mode, RelightSettings):
+            start = time.perf_counter()
+            mode = frame.relight_mode
+            blend_cameras(field, camera, mode.view_interpolation, n=mode.n, needed=plan.visible)
+            blends.append(time.perf_counter() - start)
+    return 1000.0 * float(np.median(plans)), (1000.0 * float(np.median(blends)) if blends else None)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -95,6 +95,13 @@ def ablation_methods(quick: bool = False) -> list[Method]:
             ModelRelightSettings(lighting="sampled", k=CHAIN_K),
         ),
         Method("+ per-sample models, grid 64", MOST_ACCURATE_MODELS),
+        # The interactive form of the last step (render.precomputed_lighting): on the chart
+        # beside the exact grid sum it approximates.
+        Method(
+            "  models, precomputed lighting",
+            replace(MOST_ACCURATE_MODELS, lighting="precomputed"),
+            "branch",
+        ),
     ]
 
 

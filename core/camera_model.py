@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from core.directions import angles_deg_from_direction, direction_from_angles_deg
 from core.errors import InputError
 
-__all__ = ["PinholeCamera", "RigCamera", "camera_to_rig", "rig_to_camera"]
+__all__ = ["PinholeCamera", "RigCamera", "camera_to_rig", "project_point", "rig_to_camera"]
 
 
 @dataclass(frozen=True)
@@ -111,6 +111,33 @@ class PinholeCamera:
         return col, row, depth
 
 
+@numba.njit(cache=True, inline="always")
+def project_point(
+    x: float,
+    y: float,
+    z: float,
+    position: NDArray[np.float64],
+    axes: NDArray[np.float64],
+    focal: float,
+    centre_col: float,
+    centre_row: float,
+) -> tuple[float, float, float]:
+    """(col, row, depth) of the rig-frame point (x, y, z): the one projection formula.
+
+    Compiled into the kernels that project many points (:meth:`PinholeCamera.project`, the
+    splats' geometry), so they cannot drift apart. Points at or behind the camera plane get
+    infinite image coordinates (no division by a negative depth).
+    """
+    dx = x - position[0]
+    dy = y - position[1]
+    dz = z - position[2]
+    cx = axes[0, 0] * dx + axes[0, 1] * dy + axes[0, 2] * dz
+    cy = axes[1, 0] * dx + axes[1, 1] * dy + axes[1, 2] * dz
+    cz = axes[2, 0] * dx + axes[2, 1] * dy + axes[2, 2] * dz
+    safe = cz if cz > 0.0 else np.inf
+    return centre_col + focal * cx / safe, centre_row - focal * cy / safe, cz
+
+
 @numba.njit(cache=True, parallel=True)
 def _project(
     points: NDArray[np.floating],
@@ -125,16 +152,10 @@ def _project(
 ) -> None:
     # One pass instead of numpy's temporaries: a new view projects every point (250k: 30 -> 2 ms).
     for p in numba.prange(points.shape[0]):
-        dx = points[p, 0] - position[0]
-        dy = points[p, 1] - position[1]
-        dz = points[p, 2] - position[2]
-        x = axes[0, 0] * dx + axes[0, 1] * dy + axes[0, 2] * dz
-        y = axes[1, 0] * dx + axes[1, 1] * dy + axes[1, 2] * dz
-        z = axes[2, 0] * dx + axes[2, 1] * dy + axes[2, 2] * dz
-        safe = z if z > 0.0 else np.inf
-        col[p] = centre_col + focal * x / safe
-        row[p] = centre_row - focal * y / safe
-        depth[p] = z
+        col[p], row[p], depth[p] = project_point(
+            points[p, 0], points[p, 1], points[p, 2], position, axes, focal, centre_col,
+            centre_row,
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -38,7 +38,7 @@ from render.output import display_picture
 from render.overlay import sample_overlay
 from render.relight_mode import ModeChoice, RelightEngine, RelightMode
 from render.relighter import RelightSettings, RelitImage
-from render.tonemap import auto_exposure, to_uint8, tone_map
+from render.tonemap import auto_exposure, display_8bit
 
 __all__ = [
     "LIVE_MODES",
@@ -295,6 +295,7 @@ class LiveSession:
         self._truths: dict[tuple[Any, ...], tuple[NDArray[np.float32], NDArray[np.bool_]]] = {}
         self._warnings: dict[tuple[Any, ...], tuple[str, ...]] = {}
         self.frame: LiveFrame | None = None
+        self._outside_checked: PinholeCamera | None = None
         start = field.cameras[0]
         self.initial = LiveControls(
             panorama=next(iter(self.panoramas)),
@@ -384,8 +385,9 @@ class LiveSession:
             else:
                 modulation = self.modulations[controls.modulation]
         camera = self.camera(controls)
-        if self.field.points is not None and self.can_orbit:
-            require_outside(self.field.points, camera)
+        if self.field.points is not None and self.can_orbit and camera != self._outside_checked:
+            require_outside(self.field.points, camera)  # a pass over the cloud: once a view
+            self._outside_checked = camera
         engine = self._engine(mode)
         panorama = self.panoramas[controls.panorama]
         lighting = controls.lighting_key()
@@ -505,7 +507,7 @@ class LiveSession:
             if lights is not None and lights.labels is not None and lights.k <= 4096:
                 full = sample_overlay(rgb, lights, exposure=exposure)
             else:
-                full = to_uint8(tone_map(rgb, exposure=exposure))
+                full = display_8bit(rgb, exposure=exposure)
             height = min(PANORAMA_PICTURE_HEIGHT, full.shape[0])
             picture = cv2.resize(full, (2 * height, height), interpolation=cv2.INTER_AREA)
             self._panorama_pictures = {lighting: np.ascontiguousarray(picture)}

@@ -13,6 +13,7 @@ import time
 from dataclasses import dataclass, field, replace
 from typing import Literal, get_args
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -205,7 +206,10 @@ class Relighter:
         self._environment: EnvironmentLighting | None = None
         self._view: tuple[ViewBlend, SplatPlan | None] | None = None
         self._view_field: ViewField | None = None
-        self._camera_radiance: dict[int, NDArray[np.float32]] = {}
+        # (S, P, 3): each measured camera's radiance under the lighting, filled as views need
+        # them (np.zeros maps pages on first write, so unused cameras cost no memory).
+        self._camera_radiance: NDArray[np.float32] | None = None
+        self._radiance_ready = np.zeros(field_store.shape[0], dtype=bool)
         self._view_changed = True
         self._spacing: float | None = None
         if self.settings.scheme == "pixels" and field_store.normals is None:
@@ -263,7 +267,7 @@ class Relighter:
         else:
             self._lighting = projection_light_weights(rgb, measured)
         self._environment = lighting
-        self._camera_radiance.clear()
+        self._radiance_ready[:] = False
 
     def set_view(self, camera: PinholeCamera) -> float:
         """Blend the cameras for a view and plan its splats; returns the seconds it took."""
@@ -319,10 +323,37 @@ class Relighter:
 
     def _blend_camera_radiance(self, blend: ViewBlend) -> NDArray[np.float32]:
         assert self._lighting is not None
-        radiance = np.zeros((self.field.shape[2], 3), dtype=np.float32)
-        for row, camera in enumerate(blend.cameras):
-            index = int(camera)
-            if index not in self._camera_radiance:
-                self._camera_radiance[index] = relight_camera(self.field, index, self._lighting)
-            radiance += blend.weights[row][:, None] * self._camera_radiance[index]
+        s_count, _, p_count = self.field.shape
+        if self._camera_radiance is None:
+            self._camera_radiance = np.zeros((s_count, p_count, 3), dtype=np.float32)
+        for camera in blend.cameras:
+            if not self._radiance_ready[camera]:
+                self._camera_radiance[camera] = relight_camera(
+                    self.field, int(camera), self._lighting
+                )
+                self._radiance_ready[camera] = True
+        radiance = np.empty((p_count, 3), dtype=np.float32)
+        _blend_radiance(blend.cameras, blend.weights, self._camera_radiance, radiance)
         return radiance
+
+
+@numba.njit(cache=True, parallel=True)
+def _blend_radiance(
+    cameras: NDArray[np.int64],
+    weights: NDArray[np.float32],
+    camera_radiance: NDArray[np.float32],
+    out: NDArray[np.float32],
+) -> None:
+    """out[p] = sum_c weights[c, p] camera_radiance[cameras[c], p]: one pass, no temporaries."""
+    for p in numba.prange(out.shape[0]):
+        r = g = b = numba.float32(0.0)
+        for row in range(cameras.shape[0]):
+            w = weights[row, p]
+            if w != 0.0:
+                source = camera_radiance[cameras[row], p]
+                r += w * source[0]
+                g += w * source[1]
+                b += w * source[2]
+        out[p, 0] = r
+        out[p, 1] = g
+        out[p, 2] = b

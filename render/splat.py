@@ -3,9 +3,14 @@
 For a fixed view, which pixels each visible point covers and with what weight does not depend
 on the lighting. :func:`plan_splats` finds it once (a z-buffer of disks one point spacing wide,
 then every splat within a depth tolerance of the front surface, weighted by 1 - (d / r)^2 and
-normalised per pixel) and stores it as a sparse pixel x point matrix; :func:`splat` then costs
-one sparse product per frame. The disk loop is :func:`core.splat.for_each_cover`, shared with
-the simulator.
+normalised per pixel) and stores the (pixel, point, weight) records band by band of image
+rows; :func:`splat` then costs one pass over the records per frame. The disk loop is
+:func:`core.splat.for_each_cover`, shared with the simulator.
+
+Both run on the bands of :class:`core.splat.RowBands` in parallel: one band's z-buffer and its
+records are one task (its rows stay in cache between them), and no two bands write one pixel.
+Within a pixel the records come in increasing point order, so a frame sums exactly as a
+serial loop over the points would.
 """
 
 from __future__ import annotations
@@ -20,35 +25,43 @@ from numpy.typing import NDArray
 from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.point_spacing import point_spacing
-from core.splat import camera_splats, for_each_cover, splat_weight
+from core.splat import camera_disks, for_each_cover, splat_weight, zbuffer_band
 
 __all__ = ["SplatPlan", "plan_splats", "splat"]
 
 
 @dataclass(frozen=True)
 class SplatPlan:
-    """The splats of one view: a sparse (pixels x points) matrix in CSR order over pixels.
+    """The splats of one view: (pixel, point, weight) records, grouped by band of image rows.
 
     Attributes
     ----------
     height, width : int, image size
-    pixel_start : ndarray, shape (H W + 1,), int64, row pointers
-    point_index : ndarray, shape (nnz,), int64, contributing point of each entry
-    weight : ndarray, shape (nnz,), float32, normalised to sum 1 over each covered pixel
+    record_start, record_count : ndarray, shape (B,), int64, the records of band b are
+        ``[record_start[b], record_start[b] + record_count[b])`` (between bands, unused room)
+    pixel_index : ndarray, shape (n,), int32, flat pixel i W + j of each record
+    point_index : ndarray, shape (n,), int32, contributing point of each record
+    weight : ndarray, shape (n,), float32, normalised to sum 1 over each covered pixel
+    coverage : ndarray, shape (H, W), bool, pixels the object covers
     visible : ndarray, shape (P,), bool, points at the front surface (they need relighting)
     """
 
     height: int
     width: int
-    pixel_start: NDArray[np.int64]
-    point_index: NDArray[np.int64]
+    record_start: NDArray[np.int64]
+    record_count: NDArray[np.int64]
+    pixel_index: NDArray[np.int32]
+    point_index: NDArray[np.int32]
     weight: NDArray[np.float32]
+    coverage: NDArray[np.bool_]
     visible: NDArray[np.bool_]
 
     @property
-    def coverage(self) -> NDArray[np.bool_]:
-        """Pixels the object covers; shape (H, W)."""
-        return (np.diff(self.pixel_start) > 0).reshape(self.height, self.width)
+    def records(self) -> NDArray[np.int64]:
+        """Indices of the used records, band by band; shape (nnz,)."""
+        return np.concatenate(
+            [np.arange(s, s + c) for s, c in zip(self.record_start, self.record_count, strict=True)]
+        )
 
 
 def plan_splats(
@@ -62,26 +75,38 @@ def plan_splats(
     ``spacing`` is the surface distance between neighbouring points (estimated by
     :func:`point_spacing` when None); splats one spacing wide leave no holes.
     """
-    cloud = np.asarray(points, dtype=np.float64)
+    cloud = np.asarray(points)
     if spacing is None:
         spacing = point_spacing(cloud)
     if not spacing > 0:
         raise InputError(f"point spacing must be positive, got {spacing}")
-    splats = camera_splats(cloud, normals, camera, spacing)
-    cols, rows, depth, radius = splats.cols, splats.rows, splats.depth, splats.radius
-    buffer, tolerance = splats.buffer, splats.tolerance
-    counts = np.zeros(camera.height * camera.width + 1, dtype=np.int64)
-    _count(cols, rows, depth, radius, buffer, tolerance, counts)
-    pixel_start = np.concatenate([[0], np.cumsum(counts[:-1])]).astype(np.int64)
-    point_index = np.empty(pixel_start[-1], dtype=np.int64)
-    weight = np.empty(pixel_start[-1], dtype=np.float64)
-    _fill(cols, rows, depth, radius, buffer, tolerance, pixel_start.copy(), point_index, weight)
-    _normalise(pixel_start, weight)
+    if len(cloud) >= 2**31 or camera.height * camera.width >= 2**31:
+        raise InputError(
+            f"{len(cloud)} points in a {camera.width}x{camera.height} view: splat plans index "
+            "points and pixels with 32-bit integers; split the cloud or the view"
+        )
+    disks = camera_disks(cloud, normals, camera, spacing)
+    bands = disks.bands
+    # Each band gets room for every pixel of its disks' bounding boxes (an upper bound on its
+    # records); the pages of room left unused are never touched.
+    record_start = np.zeros(len(bands.cells), dtype=np.int64)
+    np.cumsum(bands.cells[:-1], out=record_start[1:])
+    room = int(bands.cells.sum())
+    pixel_index = np.empty(room, dtype=np.int32)
+    point_index = np.empty(room, dtype=np.int32)
+    weight = np.empty(room, dtype=np.float32)
+    record_count = np.zeros(len(bands.cells), dtype=np.int64)
+    buffer = np.full((camera.height, camera.width), np.inf)
+    total = np.zeros(camera.height * camera.width)
     visible = np.zeros(len(cloud), dtype=bool)
-    visible[point_index] = True
+    _plan(
+        bands.start, bands.points, bands.disks, bands.rows_per_band, disks.tolerance, buffer,
+        record_start, record_count, pixel_index, point_index, weight, total, visible,
+    )  # fmt: skip
     return SplatPlan(
-        camera.height, camera.width, pixel_start, point_index, weight.astype(np.float32), visible
-    )
+        camera.height, camera.width, record_start, record_count, pixel_index, point_index,
+        weight, (total > 0).reshape(camera.height, camera.width), visible,
+    )  # fmt: skip
 
 
 def splat(plan: SplatPlan, radiance: NDArray[np.floating]) -> NDArray[np.float32]:
@@ -92,83 +117,94 @@ def splat(plan: SplatPlan, radiance: NDArray[np.floating]) -> NDArray[np.float32
             f"radiance must be ({len(plan.visible)}, 3) for this plan, got {colours.shape}"
         )
     image = np.zeros((plan.height * plan.width, 3), dtype=np.float32)
-    _gather(plan.pixel_start, plan.point_index, plan.weight, colours, image)
+    _splat(
+        plan.record_start, plan.record_count, plan.pixel_index, plan.point_index, plan.weight,
+        colours, image,
+    )  # fmt: skip
     return image.reshape(plan.height, plan.width, 3)
 
 
 @numba.njit(cache=True, inline="always")
-def _count_cover(
-    p: int, pixel: int, d2: float, r2: float, z: float, counts: NDArray[np.int64]
-) -> bool:
-    counts[pixel] += 1
-    return False
-
-
-@numba.njit(cache=True)
-def _count(
-    cols: NDArray[np.float64],
-    rows: NDArray[np.float64],
-    depth: NDArray[np.float64],
-    radius: NDArray[np.float64],
-    buffer: NDArray[np.float64],
-    tolerance: float,
-    counts: NDArray[np.int64],
-) -> None:
-    for_each_cover(cols, rows, depth, radius, buffer, tolerance, False, _count_cover, counts)
-
-
-@numba.njit(cache=True, inline="always")
-def _fill_cover(p: int, pixel: int, d2: float, r2: float, z: float, state: Any) -> bool:
-    cursor, point_index, weight = state
-    k = cursor[pixel]
+def _record_cover(p: int, pixel: int, d2: float, r2: float, z: float, state: Any) -> bool:
+    pixel_index, point_index, weight, total, visible, next_record = state
+    k = next_record[0]
+    w = splat_weight(d2, r2)
+    pixel_index[k] = pixel
     point_index[k] = p
-    weight[k] = splat_weight(d2, r2)
-    cursor[pixel] = k + 1
+    weight[k] = w
+    total[pixel] += np.float32(w)  # the sum of the stored (float32) weights, in float64
+    visible[p] = True
+    next_record[0] = k + 1
     return False
 
 
 @numba.njit(cache=True)
-def _fill(
-    cols: NDArray[np.float64],
-    rows: NDArray[np.float64],
-    depth: NDArray[np.float64],
-    radius: NDArray[np.float64],
-    buffer: NDArray[np.float64],
+def _plan_band(
+    members: NDArray[np.int64],
+    disks: NDArray[np.float64],
+    row_lo: int,
+    row_hi: int,
     tolerance: float,
-    cursor: NDArray[np.int64],
-    point_index: NDArray[np.int64],
-    weight: NDArray[np.float64],
+    buffer: NDArray[np.float64],
+    first: int,
+    pixel_index: NDArray[np.int32],
+    point_index: NDArray[np.int32],
+    weight: NDArray[np.float32],
+    total: NDArray[np.float64],
+    visible: NDArray[np.bool_],
+) -> int:
+    """One band: its z-buffer, its records from ``first`` on, normalised; returns their count."""
+    # A function of its own, called from the parallel loop: numba's parfors lose the writes
+    # through a tuple of arrays built in (or passed into) a prange body. A point in two bands
+    # may be marked visible by both: the same value, so the order does not matter.
+    zbuffer_band(members, disks, row_lo, row_hi, buffer)
+    next_record = np.array([first])
+    state = (pixel_index, point_index, weight, total, visible, next_record)
+    for_each_cover(members, disks, row_lo, row_hi, buffer, tolerance, False, _record_cover,
+                   state)  # fmt: skip
+    for k in range(first, next_record[0]):
+        weight[k] = weight[k] / total[pixel_index[k]]
+    return int(next_record[0]) - first
+
+
+@numba.njit(cache=True, parallel=True)
+def _plan(
+    start: NDArray[np.int64],
+    members: NDArray[np.int64],
+    disks: NDArray[np.float64],
+    rows_per_band: int,
+    tolerance: float,
+    buffer: NDArray[np.float64],
+    record_start: NDArray[np.int64],
+    record_count: NDArray[np.int64],
+    pixel_index: NDArray[np.int32],
+    point_index: NDArray[np.int32],
+    weight: NDArray[np.float32],
+    total: NDArray[np.float64],
+    visible: NDArray[np.bool_],
 ) -> None:
-    state = (cursor, point_index, weight)
-    for_each_cover(cols, rows, depth, radius, buffer, tolerance, False, _fill_cover, state)
+    for band in numba.prange(start.shape[0] - 1):
+        a, b = start[band], start[band + 1]
+        record_count[band] = _plan_band(
+            members[a:b], disks[a:b], band * rows_per_band, (band + 1) * rows_per_band,
+            tolerance, buffer, record_start[band], pixel_index, point_index, weight, total,
+            visible,
+        )  # fmt: skip
 
 
 @numba.njit(cache=True, parallel=True)
-def _normalise(pixel_start: NDArray[np.int64], weight: NDArray[np.float64]) -> None:
-    for pixel in numba.prange(pixel_start.shape[0] - 1):
-        total = 0.0
-        for k in range(pixel_start[pixel], pixel_start[pixel + 1]):
-            total += weight[k]
-        for k in range(pixel_start[pixel], pixel_start[pixel + 1]):
-            weight[k] /= total
-
-
-@numba.njit(cache=True, parallel=True)
-def _gather(
-    pixel_start: NDArray[np.int64],
-    point_index: NDArray[np.int64],
+def _splat(
+    record_start: NDArray[np.int64],
+    record_count: NDArray[np.int64],
+    pixel_index: NDArray[np.int32],
+    point_index: NDArray[np.int32],
     weight: NDArray[np.float32],
     colours: NDArray[np.float32],
     image: NDArray[np.float32],
 ) -> None:
-    for pixel in numba.prange(pixel_start.shape[0] - 1):
-        r = g = b = numba.float32(0.0)
-        for k in range(pixel_start[pixel], pixel_start[pixel + 1]):
-            p = point_index[k]
-            w = weight[k]
-            r += w * colours[p, 0]
-            g += w * colours[p, 1]
-            b += w * colours[p, 2]
-        image[pixel, 0] = r
-        image[pixel, 1] = g
-        image[pixel, 2] = b
+    for band in numba.prange(record_start.shape[0]):
+        for k in range(record_start[band], record_start[band] + record_count[band]):
+            pixel, p, w = pixel_index[k], point_index[k], weight[k]
+            image[pixel, 0] += w * colours[p, 0]
+            image[pixel, 1] += w * colours[p, 1]
+            image[pixel, 2] += w * colours[p, 2]

@@ -14,6 +14,7 @@ from core.directions import (
 )
 from core.errors import InputError
 from processing.interpolation import (
+    BRUTE_FORCE_LIMIT,
     METHODS,
     RBF_NEIGHBOURS,
     DirectionWeights,
@@ -112,6 +113,19 @@ def test_paper_is_eq1(m: int) -> None:
         expected = np.cos(angles[nearest]) / np.cos(angles[nearest]).sum()
         np.testing.assert_array_equal(indices, nearest)
         np.testing.assert_allclose(weights, expected, rtol=1e-12)
+
+
+@pytest.mark.parametrize("count", [BRUTE_FORCE_LIMIT, BRUTE_FORCE_LIMIT + 1])
+@pytest.mark.parametrize("method", ["paper", "nearest", "rbf"])
+def test_neighbours_by_trial_and_by_tree_agree(count: int, method: str) -> None:
+    # Up to the limit the neighbours are tried one by one, above it a k-d tree finds them.
+    measured = _sphere(count, 3)
+    queries = _sphere(500, 4)
+    w = interpolation_weights(measured, queries, method)
+    k = w.indices.shape[1] + (1 if method == "rbf" else 0)
+    nearest = np.argsort(np.linalg.norm(queries[:, None] - measured[None], axis=2), axis=1)
+    np.testing.assert_array_equal(w.indices, nearest[:, : w.indices.shape[1]])
+    assert k <= count
 
 
 def test_paper_blends_neighbours_even_at_a_measured_direction() -> None:

@@ -10,6 +10,7 @@ from core.directions import hemisphere_layout
 from core.errors import InputError
 from core.field_store import FieldStoreWriter, ReflectanceField
 from core.light_set import LightSet
+from processing.interpolation import interpolation_weights
 from processing.panorama import panorama_from_array
 from render.light_weights import (
     pixel_light_weights,
@@ -88,6 +89,38 @@ def test_camera_weights_sum_to_one_and_holes_are_reported(torus: ReflectanceFiel
     assert np.all(sums[blend.holes] == 0)
     lighting = projection_light_weights(_panorama(0), torus.light_directions)
     assert np.all(relight(torus, lighting, blend)[blend.holes] == 0)
+
+
+@pytest.mark.parametrize("method", ["paper", "barycentric"])
+def test_camera_blend_keeps_the_cameras_that_see_each_sample(
+    torus: ReflectanceField, method: str
+) -> None:
+    # The rule, in numpy: the interpolation's cameras that see a sample, renormalised; else
+    # the nearest camera (by angle from where the ray to the eye meets the cameras' sphere)
+    # that sees it; else a hole.
+    between = PinholeCamera(200.0, 50.0, width=64, height=64)
+    blend = blend_cameras(torus, between, method, n=2)
+    points = torus.points.astype(np.float64)
+    ray = between.position - points
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    along = np.einsum("pk,pk->p", points, ray)
+    radius = np.mean([c.distance for c in torus.cameras])
+    reach = along**2 - np.einsum("pk,pk->p", points, points) + radius**2
+    crossing = points + (np.sqrt(np.maximum(reach, 0.0)) - along)[:, None] * ray
+    towards = crossing / np.linalg.norm(crossing, axis=1, keepdims=True)
+    chosen = interpolation_weights(torus.camera_directions, towards, method, m=2)
+    expected = np.zeros((len(torus.cameras), len(points)))
+    for p in range(len(points)):
+        seen = torus.visibility[chosen.indices[p], p]
+        weights = chosen.weights[p] * seen
+        if weights.sum() > 0:
+            np.add.at(expected[:, p], chosen.indices[p], weights / weights.sum())
+        elif torus.visibility[:, p].any():
+            order = np.argsort(-(torus.camera_directions @ towards[p]))
+            expected[order[torus.visibility[order, p]][0], p] = 1.0
+    np.testing.assert_array_equal(blend.holes, ~torus.visibility.any(axis=0))
+    np.testing.assert_array_equal(blend.cameras, np.flatnonzero(expected.any(axis=1)))
+    np.testing.assert_allclose(blend.weights, expected[blend.cameras], atol=1e-6)
 
 
 def test_light_weights_carry_all_the_light(glossy: ReflectanceField) -> None:

@@ -34,10 +34,10 @@ def test_weights_sum_to_one_per_covered_pixel() -> None:
     plan = plan_splats(
         samples.points, samples.normals, PinholeCamera(0.0, 30.0, width=64, height=64)
     )
-    sums = np.add.reduceat(
-        plan.weight.astype(np.float64), plan.pixel_start[:-1][np.diff(plan.pixel_start) > 0]
-    )
-    np.testing.assert_allclose(sums, 1.0, rtol=1e-5)
+    records = plan.records
+    sums = np.bincount(plan.pixel_index[records], weights=plan.weight[records], minlength=64 * 64)
+    np.testing.assert_allclose(sums[plan.coverage.ravel()], 1.0, rtol=1e-5)
+    assert np.all(sums[~plan.coverage.ravel()] == 0)
     ones = splat(plan, np.ones((samples.count, 3)))
     np.testing.assert_allclose(ones[plan.coverage], 1.0, rtol=1e-5)
 

@@ -14,7 +14,7 @@ from hypothesis.extra.numpy import arrays
 from numpy.typing import NDArray
 
 from core.errors import RigError
-from render.tonemap import KEY, auto_exposure, to_uint8, tone_map
+from render.tonemap import KEY, auto_exposure, display_8bit, to_uint8, tone_map
 
 
 def _srgb(linear: float) -> float:
@@ -119,6 +119,33 @@ def test_auto_exposed_tone_map_ignores_the_overall_scale(
 def test_tone_map_output_is_display_range(rgb: NDArray[np.float32]) -> None:
     out = tone_map(rgb, exposure=1.0)
     assert np.all(np.isfinite(out)) and np.all((out >= 0.0) & (out <= 1.0))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    rgb=arrays(
+        np.float32, (4, 6, 3),
+        elements=st.one_of(
+            st.floats(2.0**-20, 2.0**20, width=32), st.floats(-1.0, 0.0, width=32),
+            st.sampled_from([0.0, np.nan, np.inf, 2.0**127]),
+        ),
+    ),
+    exposure=st.one_of(st.none(), st.floats(1e-3, 1e3)),
+)  # fmt: skip
+def test_the_one_pass_display_is_tone_map_then_to_uint8(
+    rgb: NDArray[np.float32], exposure: float | None
+) -> None:
+    expected = to_uint8(tone_map(rgb, exposure=exposure))
+    np.testing.assert_array_equal(display_8bit(rgb, exposure=exposure), expected)
+
+
+def test_the_one_pass_display_of_a_picture_is_exact() -> None:
+    # A frame-sized case: every level of a wide ramp, in the same float32 steps.
+    rng = np.random.default_rng(0)
+    rgb = rng.lognormal(0.0, 2.5, (64, 96, 3)).astype(np.float32)
+    for exposure in (0.05, 1.0, 20.0):
+        expected = to_uint8(tone_map(rgb, exposure=exposure))
+        np.testing.assert_array_equal(display_8bit(rgb, exposure=exposure), expected)
 
 
 def test_to_uint8_rounds_and_clips() -> None:
