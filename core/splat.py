@@ -236,45 +236,31 @@ def depth_at_points(
     return out
 
 
-def shown_points(
-    cols: NDArray[np.float64],
-    rows: NDArray[np.float64],
-    depth: NDArray[np.float64],
-    radius: NDArray[np.float64],
-    buffer: NDArray[np.float64],
-    tolerance: float,
-) -> NDArray[np.bool_]:
+def shown_points(splats: CameraSplats) -> NDArray[np.bool_]:
     """Points (P,) whose splat blends into at least one pixel: the points an image shows.
 
     A point on a steep (grazing) surface can fail the depth test at its own centre yet show
     at a neighbouring pixel; it is seen, and its radiance is needed.
     """
-    shown = np.zeros(cols.shape, dtype=np.bool_)
-    _shown(row_bands(cols, rows, depth, radius, *buffer.shape), buffer, tolerance, shown)
+    shown = np.zeros(splats.cols.shape, dtype=np.bool_)
+    _shown(splats.bands, splats.buffer, splats.tolerance, shown)
     return shown
 
 
 def blend_splats(
-    cols: NDArray[np.float64],
-    rows: NDArray[np.float64],
-    depth: NDArray[np.float64],
-    radius: NDArray[np.float64],
-    colours: NDArray[np.float64],
-    buffer: NDArray[np.float64],
-    tolerance: float,
+    splats: CameraSplats, colours: NDArray[np.float64]
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """Blend the front surface's splats.
+    """Blend the front surface's splats of ``colours`` (P, 3).
 
     Returns
     -------
     image : ndarray, shape (H, W, 3), float32, weighted mean colour (0 where uncovered)
     weight : ndarray, shape (H, W), float32, summed splat weight (0 where uncovered)
     """
-    height, width = buffer.shape
+    height, width = splats.buffer.shape
     total = np.zeros((height, width, 3))
     weight = np.zeros((height, width))
-    bands = row_bands(cols, rows, depth, radius, height, width)
-    _blend(bands, colours, buffer, tolerance, total, weight)
+    _blend(splats.bands, colours, splats.buffer, splats.tolerance, total, weight)
     image = np.divide(
         total, weight[:, :, None], out=np.zeros_like(total), where=weight[:, :, None] > 0
     )

@@ -260,10 +260,7 @@ def build_field(
         for s, pinhole in enumerate(layout.cameras):
             shape = (pinhole.height, pinhole.width)
             splats = camera_splats(cloud.points, cloud.normals, pinhole, cloud.spacing)
-            visible = shown_points(
-                splats.cols, splats.rows, splats.depth, splats.radius, splats.buffer,
-                splats.tolerance,
-            )  # fmt: skip
+            visible = shown_points(splats)
             store.write_visibility(s, visible)
             index = np.flatnonzero(visible)
             counts["visible"] += len(index)

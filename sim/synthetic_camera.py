@@ -246,9 +246,7 @@ def _check_camera(samples: SurfaceSamples, camera: PinholeCamera) -> None:
 def camera_visibility(samples: SurfaceSamples, camera: PinholeCamera) -> NDArray[np.bool_]:
     """Which points (P,) the camera sees: facing it and blending into at least one pixel."""
     splats = camera_splats(samples.points, samples.normals, camera, samples.spacing)
-    return shown_points(
-        splats.cols, splats.rows, splats.depth, splats.radius, splats.buffer, splats.tolerance
-    )
+    return shown_points(splats)
 
 
 def image_of_points(
@@ -256,9 +254,9 @@ def image_of_points(
 ) -> SyntheticImage:
     """Splat points of known radiance (P, 3) into the camera's image, with visibility."""
     s = camera_splats(samples.points, samples.normals, camera, samples.spacing)
-    visible = shown_points(s.cols, s.rows, s.depth, s.radius, s.buffer, s.tolerance)
+    visible = shown_points(s)
     colours = np.asarray(radiance, dtype=np.float64)
-    image, weight = blend_splats(s.cols, s.rows, s.depth, s.radius, colours, s.buffer, s.tolerance)
+    image, weight = blend_splats(s, colours)
     return SyntheticImage(
         rgb=image,
         coverage=weight > 0,

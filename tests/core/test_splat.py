@@ -48,9 +48,7 @@ def test_banded_passes_match_the_dense_reference(seed: int) -> None:
     assert len(s.bands.start) - 1 == -(-37 // ROWS_PER_BAND)
     np.testing.assert_array_equal(s.buffer.ravel(), buffer)
     front = covers & (s.depth[:, None] <= buffer[None] + s.tolerance)
-    np.testing.assert_array_equal(
-        shown_points(s.cols, s.rows, s.depth, s.radius, s.buffer, s.tolerance), front.any(axis=1)
-    )
+    np.testing.assert_array_equal(shown_points(s), front.any(axis=1))
     # The plan: every front cover, filed by pixel in increasing point order.
     plan = plan_splats(points, normals, camera, spacing=0.06)
     pixel, point = np.nonzero(front.T)
@@ -64,7 +62,7 @@ def test_banded_passes_match_the_dense_reference(seed: int) -> None:
     np.testing.assert_array_equal(plan.visible, front.any(axis=1))
     # Blending colours sums the same weights.
     colours = np.random.default_rng(seed).random((len(points), 3))
-    image, summed = blend_splats(s.cols, s.rows, s.depth, s.radius, colours, s.buffer, s.tolerance)
+    image, summed = blend_splats(s, colours)
     np.testing.assert_allclose(summed.ravel(), total, rtol=1e-6)
     expected = np.zeros((37 * 29, 3))
     np.add.at(expected, pixel, weight[:, None] * colours[point])
