@@ -29,5 +29,11 @@ def linear_to_srgb(linear: NDArray[np.floating]) -> NDArray[np.float32]:
 
 
 def luminance(rgb: NDArray[np.floating]) -> NDArray[np.float32]:
-    """Rec. 709 luminance of linear RGB; shape (..., 3) -> (...), float32."""
-    return (np.asarray(rgb, dtype=np.float32) @ REC709_LUMINANCE).astype(np.float32, copy=False)
+    """Rec. 709 luminance of linear RGB; shape (..., 3) -> (...), float32.
+
+    A weighted sum rather than a matrix product: numpy 2.4's matmul goes through BLAS, which
+    raises "invalid value" on infinite radiance (then refused by the callers, not warned of).
+    """
+    v = np.asarray(rgb, dtype=np.float32)
+    r, g, b = (np.float32(w) for w in REC709_LUMINANCE)
+    return v[..., 0] * r + v[..., 1] * g + v[..., 2] * b
