@@ -31,6 +31,7 @@ from app.cli_calibrate import add_calibrate
 from app.cli_capture import add_capture
 from app.cli_evaluate import add_evaluate, add_transfer_option, relight_lights
 from app.cli_export import add_export_web
+from app.cli_fit import add_fit
 from app.cli_plan import add_plan
 from app.cli_process import add_process
 from app.cli_rig import add_doctor, add_sim_start
@@ -693,6 +694,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_plan(commands)
     add_advise(commands)
     add_evaluate(commands)
+    add_fit(commands)
     add_bench_parser(commands)
     add_capture(commands)
     add_calibrate(commands)

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 from collections.abc import Sequence
 from pathlib import Path
 
 from core.atomic import output_problem
 from core.errors import InputError
+from core.memory_budget import available_memory, parse_size
 
 __all__ = [
     "IMAGE_BYTES_PER_PIXEL",
@@ -151,28 +151,13 @@ def image_size(text: str) -> tuple[int, int]:
     if max(width, height) > MAX_IMAGE_SIDE:
         raise argparse.ArgumentTypeError(f"{text}: image sides are at most {MAX_IMAGE_SIDE} pixels")
     need = width * height * IMAGE_BYTES_PER_PIXEL
-    free = _free_memory()
-    if free is not None and need > free:
+    free = available_memory()
+    if need > free:
         raise argparse.ArgumentTypeError(
             f"{text}: a view this size needs about {need / 2**30:.1f} GiB, this machine has "
             f"{free / 2**30:.1f} GiB free; choose a smaller size"
         )
     return width, height
-
-
-def _free_memory() -> int | None:
-    """Bytes of memory available now (Linux's MemAvailable), else the physical memory."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as info:
-            for line in info:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 def require_output(path: Path, *, directory: bool = False) -> Path:
@@ -212,3 +197,41 @@ def squares(text: str) -> tuple[int, int]:
     if min(x, y) < 2:
         raise argparse.ArgumentTypeError(f"a ChArUco board needs 2x2 squares or more, got {text!r}")
     return x, y
+
+
+def memory_size(text: str) -> int:
+    """A ``--max-memory`` value (``512M``, ``2G``) in bytes; argparse refuses what is not."""
+    try:
+        return parse_size(text)
+    except InputError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def add_scale_options(p: argparse.ArgumentParser) -> None:
+    """``--max-memory`` and ``--dask``: how much a stage holds at once, and where it runs."""
+    p.add_argument(
+        "--max-memory",
+        type=memory_size,
+        metavar="SIZE",
+        help="radiance held in memory at once, per process (e.g. 2G; default: a quarter of "
+        "the memory available, at most 4 GiB); the peak is about twice this plus the outputs",
+    )
+    p.add_argument(
+        "--dask",
+        metavar="local|tcp://HOST:PORT",
+        help="run the work as Dask tasks: 'local' starts a cluster of one worker per core on "
+        "this machine, an address uses a running scheduler (docs/scale.md); the results are "
+        "the same as without it",
+    )
+    p.add_argument(
+        "--workers",
+        type=count,
+        help="--dask local: worker processes (default: one per core)",
+    )
+    p.add_argument(
+        "--worker-memory",
+        type=memory_size,
+        metavar="SIZE",
+        help="--dask local: memory limit of each worker (default: the available memory shared "
+        "among them); Dask restarts a worker that goes over it and retries its task",
+    )

@@ -175,8 +175,12 @@ def radiance_digest(slab_digests: Iterable[bytes]) -> str:
 
 # --- a whole store --------------------------------------------------------------------------
 
-#: What a chunk index of each array means (the store's layout: one chunk per slab).
-CHUNK_MEANING = {"radiance": "camera {0} light {1}", "visibility": "camera {0}"}
+#: What a chunk index of each array means (the store's layout: a slab is one or more chunks
+#: of samples).
+CHUNK_MEANING = {
+    "radiance": "camera {0} light {1} sample block {2}",
+    "visibility": "camera {0}",
+}
 
 
 @dataclass(frozen=True)
@@ -187,7 +191,7 @@ class StoreCheck:
     ----------
     path : Path of the store
     shape : (S, T, P) or None when the store could not be opened
-    chunks : int, radiance chunks read
+    chunks : int, radiance slabs (camera, light) read whole
     digest : "matches", "differs", "not recorded" (stores written before it was) or
         "not checked" (chunks could not be read)
     problems : list of str, each a damage found (empty: intact)
@@ -212,7 +216,7 @@ class StoreCheck:
             s, t, p = self.shape
             head = (
                 f"{self.path}: field store of {s} cameras x {t} lights x {p} samples, "
-                f"{self.chunks} radiance chunks read, radiance digest {self.digest}"
+                f"{self.chunks} radiance slabs read, radiance digest {self.digest}"
             )
         verdict = "intact" if self.ok else f"DAMAGED ({len(self.problems)} problems)"
         return "\n".join([f"{head}: {verdict}", *(f"  {line}" for line in self.problems)])
@@ -232,11 +236,14 @@ def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
     except Exception as error:  # zarr raises several types for non-stores
         return StoreCheck(path, None, 0, "not checked", (f"cannot open: {error}",))
     problems: list[str] = []
+    incomplete: set[tuple[int, int]] = set()  # slabs with a chunk missing
     for name in sorted(group.array_keys()):
         array = group[name]
         missing = missing_chunks(path, array)
         if missing:
             problems.append(_missing_message(path, array, missing))
+            if name == "radiance":
+                incomplete = {(index[0], index[1]) for index in missing}
         elif name != "radiance":
             try:
                 values = read_checked(path, array)
@@ -249,8 +256,8 @@ def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
     digests: list[bytes] = []
     unreadable = False
     keys = [(a, b) for a in range(s) for b in range(t)]
-    for a, b in tqdm(keys, desc="verify", unit="chunk", disable=not progress):
-        if not chunk_file(path, radiance, (a, b, 0, 0)).is_file():
+    for a, b in tqdm(keys, desc="verify", unit="slab", disable=not progress):
+        if (a, b) in incomplete:
             unreadable = True
             continue
         try:

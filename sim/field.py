@@ -17,7 +17,7 @@ from tqdm import tqdm
 
 from core.camera_model import PinholeCamera
 from core.directions import angles_deg_from_direction, hemisphere_layout
-from core.field_store import FieldStoreWriter
+from core.field_store import SAMPLE_CHUNK, FieldStoreWriter
 from sim.scenes import build_scene, get_scene
 from sim.synthetic_camera import (
     DirectionalLight,
@@ -57,12 +57,14 @@ def simulate_field(
     dtype: str = "float32",
     progress: bool = False,
     overwrite: bool = False,
+    sample_chunk: int = SAMPLE_CHUNK,
 ) -> Path:
     """Write the simulated field of ``scene`` to a new store at ``path``; returns the path.
 
     ``lights`` is a count (directions of ``layout``) or the directions themselves (T, 3),
     unit vectors in the rig frame: held-out test lights, say. ``overwrite`` replaces a store
-    already there (and the model fit saved beside it).
+    already there (and the model fit saved beside it). ``sample_chunk``: samples per stored
+    chunk (:class:`core.field_store.FieldStoreWriter`).
     """
     spec = get_scene(scene)
     samples = build_scene(scene, points)
@@ -79,6 +81,7 @@ def simulate_field(
         light_directions=light_directions,
         cameras=cameras,
         dtype=dtype,
+        sample_chunk=sample_chunk,
         provenance={
             "source": "simulator",
             "scene": spec.to_json(),

@@ -88,7 +88,7 @@ Package layout (each module imports only those above it)
 ``stereo``      photometric stereo, a pixel field's starting normals (``PS_DARK``, ``PS_BRIGHT``)
 ``fit_kernel``  the numba kernel of the parametric fits (``LOBE_PEAK``, ``MIN_LOBE_SUPPORT``)
 ``fitting``     :func:`fit_sample_models` (``ALPHA_RANGE``, ``SHADOW_RATIO``,
-                ``SHADOW_ITERATIONS``, ``FIT_MEMORY_BYTES``)
+                ``SHADOW_ITERATIONS``, :func:`sample_block_size`)
 ``shadows``     the geometric shadow marks
 ``choice``      :func:`choose_model` and the LOO table (``PARSIMONY_RELATIVE``, ...)
 """
@@ -114,7 +114,12 @@ from processing.sample_models.fits import BasisModelName as BasisModelName
 from processing.sample_models.fits import Fit as Fit
 from processing.sample_models.fits import ModelName as ModelName
 from processing.sample_models.fits import ParametricModelName as ParametricModelName
-from processing.sample_models.fitting import ALPHA_RANGE, fit_sample_models
+from processing.sample_models.fitting import (
+    ALPHA_RANGE,
+    budget_for,
+    fit_sample_models,
+    sample_block_size,
+)
 from processing.sample_models.loo import LooError, interpolation_loo, leave_one_out_weights
 from processing.sample_models.shadows import (
     geometric_shadow_marks,
@@ -134,6 +139,7 @@ __all__ = [
     "ModelScore",
     "ParametricFit",
     "SampleModels",
+    "budget_for",
     "choose_model",
     "evaluate_basis",
     "fit_sample_models",
@@ -142,6 +148,7 @@ __all__ = [
     "interpolation_loo",
     "leave_one_out_weights",
     "photometric_stereo",
+    "sample_block_size",
     "shadow_mark_errors",
     "with_geometric_visibility",
 ]

@@ -7,6 +7,7 @@ and runs the parametric kernel over memory-bounded chunks of samples.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -15,7 +16,8 @@ from tqdm import tqdm
 
 from core.camera_model import rig_to_camera
 from core.errors import DatasetError, InputError
-from core.field_store import ReflectanceField
+from core.field_store import ReflectanceField, is_field_store
+from core.memory_budget import default_memory_budget, format_size
 from processing.sample_models.bases import fit_basis
 from processing.sample_models.fit_kernel import fit_samples
 from processing.sample_models.fits import (
@@ -31,7 +33,7 @@ from processing.sample_models.fits import (
 from processing.sample_models.loo import LooError, leave_one_out_weights
 from processing.sample_models.stereo import photometric_stereo
 
-__all__ = ["ALPHA_RANGE", "fit_sample_models"]
+__all__ = ["ALPHA_RANGE", "budget_for", "fit_sample_models", "sample_block_size"]
 
 #: GGX roughness searched (a lobe narrower than 0.02 is a mirror no rig samples).
 ALPHA_RANGE = (0.02, 1.0)
@@ -44,9 +46,6 @@ SHADOW_RATIO = 0.5
 SHADOW_ITERATIONS = 4
 #: Normal refinement: first step and smallest step (radians) of the pattern search.
 REFINE_STEP, REFINE_MIN_STEP = 0.08, 0.002
-#: Bytes of radiance held in memory while fitting: the whole field in its storage dtype when it
-#: fits (one pass over the store), else float32 chunks of samples (one pass per chunk).
-FIT_MEMORY_BYTES = 6 << 30
 
 
 def fit_sample_models(
@@ -56,7 +55,8 @@ def fit_sample_models(
     alpha_range: tuple[float, float] = ALPHA_RANGE,
     shadow_ratio: float = SHADOW_RATIO,
     refine_normals: bool | None = None,
-    memory_bytes: int = FIT_MEMORY_BYTES,
+    memory_bytes: int | None = None,
+    client: Any = None,
     progress: bool = False,
 ) -> SampleModels:
     """Fit per-sample models to every sample of a field and score them by leave-one-light-out.
@@ -75,8 +75,19 @@ def fit_sample_models(
     refine_normals : bool, optional
         Move each normal to the parametric model's optimum (pattern search). Default: on for
         pixel fields (their normals come from photometric stereo), off for point fields.
-    memory_bytes : int, radiance held in memory at once (see ``FIT_MEMORY_BYTES``)
-    progress : bool, show a progress bar over the chunks
+    memory_bytes : int, optional
+        Bytes of radiance held in memory at once (default
+        :func:`core.memory_budget.default_memory_budget`): the field is read and fitted in
+        blocks of samples (float32, every camera and light of each sample) of at most this
+        size, aligned to the store's chunks. The peak is up to twice this (a block as stored
+        while it is widened and reordered) plus the outputs (the fits: about 100 + 4 T bytes
+        a sample per model), whatever the field's size.
+    client : distributed.Client, optional
+        Fit the blocks as Dask tasks on this client's cluster (:func:`core.cluster.dask_client`;
+        each worker reads its block from the store, so ``field`` must be a store on disk, not
+        a subset in memory); the results are the same as in-process. ``memory_bytes`` then
+        bounds each task's block.
+    progress : bool, show a progress bar over the blocks
 
     Returns
     -------
@@ -90,6 +101,12 @@ def fit_sample_models(
         A point field without normals.
     """
     names = _check_models(field, models)
+    budget = budget_for(memory_bytes, client)
+    if client is not None and not is_field_store(field.path):
+        raise InputError(
+            f"{field.path}: Dask workers read their samples from a field store on disk; this "
+            "field is held in memory (a subset): fit it in-process"
+        )
     if not 0.0 < shadow_ratio < 1.0:
         raise InputError(f"shadow ratio must be in (0, 1), got {shadow_ratio}")
     grid = _alpha_grid(alpha_range)
@@ -117,7 +134,8 @@ def fit_sample_models(
         refine = field.sample_kind == "pixels" if refine_normals is None else refine_normals
         fitted = _fit_parametric(
             field, parametric, start_normals, eyes, points, grid,
-            refine=refine, shadow_ratio=shadow_ratio, memory_bytes=memory_bytes, progress=progress,
+            refine=refine, shadow_ratio=shadow_ratio, block=sample_block_size(field, budget),
+            client=client, progress=progress,
         )  # fmt: skip
         fits.update(fitted)
     return SampleModels(
@@ -202,47 +220,44 @@ def _fit_parametric(
     *,
     refine: bool,
     shadow_ratio: float,
-    memory_bytes: int,
+    block: int,
+    client: Any,
     progress: bool,
 ) -> dict[str, ParametricFit]:
-    """The parametric fits ``names``, chunk by chunk of samples (see fit_sample_models)."""
-    s_count, t_count, p_count = field.shape
+    """The parametric fits ``names``, block by block of samples (see fit_sample_models)."""
+    _, t_count, p_count = field.shape
     pixels = field.sample_kind == "pixels"
     lights = np.ascontiguousarray(field.light_directions, dtype=np.float64)
-    loo_indices, loo_weights = leave_one_out_weights(lights)
-    whole = _sample_major(field, memory_bytes)
-    # float32 chunks beside the stored copy: half the budget when the copy is in memory.
-    budget = memory_bytes // 2 if whole is not None else memory_bytes
-    chunk = max(1, min(p_count, int(budget // (s_count * t_count * 3 * 4))))
-    outputs: dict[str, dict[str, NDArray[Any]]] = {
-        name: {
-            "normal": np.zeros((p_count, 3)),
-            "x1": np.zeros((p_count, 3)),
-            "x2": np.zeros((p_count, 3)),
-            "alpha": np.ones(p_count),
-            "lit": np.ones((p_count, t_count), dtype=np.float32),
-            "loo": np.zeros(p_count),
-            "energy": np.zeros(p_count),
-            "fitted": np.zeros(p_count, dtype=bool),
-        }
-        for name in names
-    }
-    steps = np.array([REFINE_STEP, REFINE_MIN_STEP])
-    for start in tqdm(range(0, p_count, chunk), desc="fit", unit="chunk", disable=not progress):
-        stop = min(start + chunk, p_count)
-        radiance = _read_chunk(field, start, stop, whole)
-        seen = np.ascontiguousarray(field.visibility[:, start:stop].T)
+    job = _BlockJob(tuple(names), eyes, pixels, lights, *leave_one_out_weights(lights), grid,
+                    refine, shadow_ratio)  # fmt: skip
+    outputs = {name: _empty_outputs(p_count, t_count) for name in names}
+    blocks = [(start, min(start + block, p_count)) for start in range(0, p_count, block)]
+
+    def inputs(start: int, stop: int) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]]:
         part = slice(start, stop)
+        seen = np.ascontiguousarray(field.visibility[:, part].T)
         chunk_points = np.zeros((stop - start, 3)) if points is None else points[part].copy()
-        for name in names:
-            o = outputs[name]
-            fit_samples(
-                radiance, seen, chunk_points, np.ascontiguousarray(start_normals[part]), eyes,
-                pixels, lights, loo_indices, loo_weights, grid, GOLDEN_STEPS,
-                name == "lambert+ggx", refine, shadow_ratio, SHADOW_ITERATIONS, steps,
-                o["normal"][part], o["x1"][part], o["x2"][part], o["alpha"][part],
-                o["lit"][part], o["loo"][part], o["energy"][part], o["fitted"][part],
-            )  # fmt: skip
+        return seen, chunk_points, np.ascontiguousarray(start_normals[part])
+
+    if client is None:
+        for start, stop in tqdm(blocks, desc="fit", unit="block", disable=not progress):
+            fitted = job.run(field.sample_block(start, stop), *inputs(start, stop))
+            _place(outputs, fitted, slice(start, stop))
+    else:
+        from dask.delayed import delayed
+
+        from core.cluster import gather_with_progress
+
+        tasks = [
+            delayed(_fit_stored_block, pure=True)(
+                str(field.path), start, stop, job, *inputs(start, stop)
+            )
+            for start, stop in blocks
+        ]
+        for (start, stop), fitted in zip(
+            blocks, gather_with_progress(client, tasks, progress=progress), strict=True
+        ):
+            _place(outputs, fitted, slice(start, stop))
     fits: dict[str, ParametricFit] = {}
     for name in names:
         o = outputs[name]
@@ -261,33 +276,131 @@ def _fit_parametric(
     return fits
 
 
-def _sample_major(field: ReflectanceField, memory_bytes: int) -> NDArray[Any] | None:
-    """The whole radiance as (P, S, T, 3) in its storage dtype, or None if over ``memory_bytes``.
+Outputs = dict[str, NDArray[Any]]
 
-    Read in one pass over the cameras; when it exceeds ``memory_bytes``, chunks are read one by
-    one instead.
+
+def _empty_outputs(count: int, t_count: int) -> Outputs:
+    """The kernel's output arrays for ``count`` samples, at the values of an unfitted sample."""
+    return {
+        "normal": np.zeros((count, 3)),
+        "x1": np.zeros((count, 3)),
+        "x2": np.zeros((count, 3)),
+        "alpha": np.ones(count),
+        "lit": np.ones((count, t_count), dtype=np.float32),
+        "loo": np.zeros(count),
+        "energy": np.zeros(count),
+        "fitted": np.zeros(count, dtype=bool),
+    }
+
+
+def _place(
+    outputs: dict[ParametricModelName, Outputs],
+    fitted: dict[ParametricModelName, Outputs],
+    part: slice,
+) -> None:
+    for name, arrays in fitted.items():
+        for key, values in arrays.items():
+            outputs[name][key][part] = values
+
+
+@dataclass(frozen=True, eq=False)
+class _BlockJob:
+    """What fitting a block of samples needs besides the block.
+
+    The same for every block, so a Dask task carries it whole (it pickles: the kernel's
+    arguments are plain arrays).
+    """
+
+    names: tuple[ParametricModelName, ...]
+    eyes: NDArray[np.float64]
+    pixels: bool
+    lights: NDArray[np.float64]
+    loo_indices: NDArray[np.int64]
+    loo_weights: NDArray[np.float64]
+    grid: NDArray[np.float64]
+    refine: bool
+    shadow_ratio: float
+
+    def run(
+        self,
+        radiance: NDArray[np.float32],
+        seen: NDArray[np.bool_],
+        points: NDArray[np.float64],
+        normals: NDArray[np.float64],
+    ) -> dict[ParametricModelName, Outputs]:
+        """Fit each model to a block; returns each model's outputs (:func:`_empty_outputs`).
+
+        Radiance (n, S, T, 3), seen (n, S), points and starting normals (n, 3).
+        """
+        count, t_count = radiance.shape[0], radiance.shape[2]
+        steps = np.array([REFINE_STEP, REFINE_MIN_STEP])
+        result: dict[ParametricModelName, Outputs] = {}
+        for name in self.names:
+            o = _empty_outputs(count, t_count)
+            fit_samples(
+                radiance, seen, points, normals, self.eyes, self.pixels, self.lights,
+                self.loo_indices, self.loo_weights, self.grid, GOLDEN_STEPS,
+                name == "lambert+ggx", self.refine, self.shadow_ratio, SHADOW_ITERATIONS, steps,
+                o["normal"], o["x1"], o["x2"], o["alpha"], o["lit"], o["loo"], o["energy"],
+                o["fitted"],
+            )  # fmt: skip
+            result[name] = o
+        return result
+
+
+def _fit_stored_block(
+    path: str,
+    start: int,
+    stop: int,
+    job: _BlockJob,
+    seen: NDArray[np.bool_],
+    points: NDArray[np.float64],
+    normals: NDArray[np.float64],
+) -> dict[ParametricModelName, Outputs]:
+    """A Dask task: read samples start..stop from the store at ``path`` and fit them."""
+    field = ReflectanceField.open(path, cached_slabs=0)
+    return job.run(field.sample_block(start, stop), seen, points, normals)
+
+
+def budget_for(memory_bytes: int | None, client: Any) -> int:
+    """Bytes of radiance per block: as asked, else the default.
+
+    On a cluster the default is no more than a third of the smallest worker's memory limit
+    (the block, its widened copy, the outputs).
+    """
+    if memory_bytes is not None:
+        return memory_bytes
+    budget = default_memory_budget()
+    if client is not None:
+        from core.cluster import worker_memory
+
+        smallest = worker_memory(client)
+        if smallest:
+            budget = min(budget, smallest // 3)
+    return budget
+
+
+def sample_block_size(field: ReflectanceField, memory_bytes: int) -> int:
+    """Samples per block whose float32 radiance (every camera and light) fits ``memory_bytes``.
+
+    All the samples when they fit, else a multiple of the store's chunk when one fits, else as
+    many samples as fit.
+
+    Raises
+    ------
+    InputError
+        ``memory_bytes`` cannot hold even one sample's radiance.
     """
     s_count, t_count, p_count = field.shape
-    if s_count * t_count * p_count * 3 * field.dtype.itemsize > memory_bytes:
-        return None
-    out = np.empty((p_count, s_count, t_count, 3), dtype=field.dtype)
-    for s in range(s_count):
-        out[:, s] = field.camera_radiance(s).transpose(1, 0, 2)
-    return out
-
-
-def _read_chunk(
-    field: ReflectanceField, start: int, stop: int, whole: NDArray[Any] | None
-) -> NDArray[np.float32]:
-    """Radiance of samples start..stop as (Pc, S, T, 3), float32 (one sample's values together).
-
-    From ``whole`` (:func:`_sample_major`) when it is in memory; else read from the store,
-    which decompresses every (camera, light) chunk for each sample range.
-    """
-    if whole is not None:
-        return np.ascontiguousarray(whole[start:stop], dtype=np.float32)
-    s_count, t_count, _ = field.shape
-    out = np.empty((stop - start, s_count, t_count, 3), dtype=np.float32)
-    for s in range(s_count):
-        out[:, s] = field.camera_radiance(s, slice(start, stop)).transpose(1, 0, 2)
-    return out
+    per_sample = s_count * t_count * 3 * 4
+    samples = memory_bytes // per_sample
+    if samples < 1:
+        raise InputError(
+            f"a memory budget of {format_size(memory_bytes)} cannot hold one sample's radiance "
+            f"({format_size(per_sample)} for {s_count} cameras x {t_count} lights); allow more "
+            "(--max-memory)"
+        )
+    if samples >= p_count:
+        return p_count
+    chunk = field.sample_chunk
+    return int(samples - samples % chunk if samples >= chunk else samples)

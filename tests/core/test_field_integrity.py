@@ -41,7 +41,7 @@ def test_an_intact_store_verifies(intact: Path, capsys: pytest.CaptureFixture[st
     assert check.ok and check.digest == "matches" and check.chunks == 12
     assert main(["verify", str(intact), "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "3 cameras x 4 lights x 800 samples, 12 radiance chunks read" in out
+    assert "3 cameras x 4 lights x 800 samples, 12 radiance slabs read" in out
     assert out.splitlines()[0].endswith("radiance digest matches: intact")
 
 
@@ -53,7 +53,7 @@ def test_a_deleted_chunk_is_an_error_not_zeros(
         ReflectanceField.open(store)
     message = str(error.value)
     assert "1 of the 12 chunks of 'radiance' are missing" in message
-    assert "camera 1 light 2 (radiance/c/1/2/0/0)" in message
+    assert "camera 1 light 2 sample block 0 (radiance/c/1/2/0/0)" in message
     assert main(["verify", str(store), "--quiet"]) == 1
     out = capsys.readouterr().out
     assert "DAMAGED" in out and "camera 1 light 2" in out
@@ -79,7 +79,7 @@ def test_a_truncated_chunk_names_the_store_and_the_chunk(
     with pytest.raises(DatasetError) as error:
         field.camera_slab(2)
     message = str(error.value)
-    assert message.startswith(f"{store}: cannot read camera 2 light 1 (radiance/c/2/1/0/0)")
+    assert message.startswith(f"{store}: cannot read camera 2 light 1 sample block 0 (radiance/c/2/1/0/0)")
     assert "damaged" in message
     assert error.value.__cause__ is None and error.value.__suppress_context__
     assert main(["verify", str(store), "--quiet"]) == 1

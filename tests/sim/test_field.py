@@ -35,7 +35,7 @@ def test_field_slabs_are_the_renderer_s_radiance(tmp_path: Path) -> None:
     simulate_field(tmp_path / "f.zarr", "textured-torus", lights=5, cameras=cameras, points=8000)
     store = zarr.open_group(str(tmp_path / "f.zarr"), mode="r")
     assert store["radiance"].shape == (4, 5, 8000, 3)
-    assert store["radiance"].chunks == (1, 1, 8000, 3)  # one image, one slab
+    assert store["radiance"].chunks == (1, 1, 8000, 3)  # one image, one slab (P < SAMPLE_CHUNK)
     assert store.attrs["schema_version"] == 1
     assert store.attrs["provenance"]["scene"]["name"] == "textured-torus"
     samples = build_scene("textured-torus", 8000)

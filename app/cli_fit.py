@@ -1,0 +1,72 @@
+"""``rig fit``: fit a field's per-sample models and save them beside it, at bounded memory.
+
+Application layer: parses, opens the field and calls
+:func:`processing.sample_models.fit_sample_models` in-process or on a Dask cluster
+(:func:`core.cluster.dask_client`), then :func:`processing.sample_model_store.write_sample_models`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from app.cli_args import add_scale_options, names_among, output_file
+from core.errors import InputError
+
+__all__ = ["add_fit"]
+
+
+def add_fit(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``rig fit FIELD`` on the ``rig`` sub-command parser."""
+    from processing.sample_models import MODELS
+
+    p = commands.add_parser(
+        "fit",
+        help="fit the per-sample models of a field store (bounded memory; --dask for a cluster)",
+        description="Fit the per-sample models to every sample of a field store, block by "
+        "block of samples (at most --max-memory of radiance at once), in this process or as "
+        "Dask tasks (--dask), and save them beside the store (FIELD.models.npz, which rig "
+        "relight and rig view then use) or at -o. The results are the same either way "
+        "(docs/scale.md).",
+    )
+    p.add_argument("field", type=Path, help="field store")
+    p.add_argument(
+        "--models",
+        type=lambda text: names_among(text, MODELS, "model"),
+        help=f"comma-separated models among {', '.join(MODELS)} (default: by the field's kind)",
+    )
+    p.add_argument("-o", "--output", type=output_file, help="fit file (default FIELD.models.npz)")
+    add_scale_options(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_run_fit)
+
+
+def _run_fit(args: argparse.Namespace) -> int:
+    from core.cluster import dask_client
+    from core.field_store import ReflectanceField
+    from core.memory_budget import format_size
+    from processing.sample_model_store import default_models_path, write_sample_models
+    from processing.sample_models import budget_for, fit_sample_models, sample_block_size
+
+    field = ReflectanceField.open(args.field)
+    target = args.output or default_models_path(field.path)
+    started = time.perf_counter()
+    if args.dask != "local" and (args.workers or args.worker_memory):
+        raise InputError("--workers and --worker-memory size a local cluster: add --dask local")
+    with dask_client(args.dask, workers=args.workers, memory_limit=args.worker_memory) as client:
+        budget = budget_for(args.max_memory, client)
+        s, t, p = field.shape
+        print(
+            f"fitting {p} samples ({s} cameras x {t} lights) in blocks of "
+            f"{sample_block_size(field, budget)} samples ({format_size(budget)} of radiance)",
+            file=sys.stderr,
+        )
+        fitted = fit_sample_models(
+            field, args.models, memory_bytes=budget, client=client, progress=not args.quiet
+        )
+    write_sample_models(target, fitted, field)
+    elapsed = time.perf_counter() - started
+    print(f"{', '.join(fitted.fits)} fitted to {p} samples in {elapsed:.1f} s -> {target}")
+    return 0

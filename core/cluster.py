@@ -1,0 +1,123 @@
+"""Where the heavy stages run: in this process, or on a Dask cluster (``--dask``).
+
+``--dask local`` starts a ``LocalCluster`` sized to this machine (one single-threaded worker
+process per core, the memory shared out among them); ``--dask tcp://HOST:8786`` connects to a
+scheduler that is already running (``dask scheduler`` on one machine, ``dask worker
+tcp://HOST:8786`` on each of the others). Without the flag a stage runs in-process. The
+stages build task graphs over the field store and give the same results either way; Dask
+retries a task whose worker died, and the stages write their outputs only once every task
+has finished, so a lost worker never leaves a partial file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+from collections.abc import Iterator
+from typing import Any
+
+from core.errors import DeviceError, InputError
+from core.memory_budget import available_memory, format_size
+
+__all__ = ["CONNECT_TIMEOUT_S", "dask_client", "gather_with_progress", "worker_memory"]
+
+#: Seconds to wait for an existing scheduler to answer before giving up.
+CONNECT_TIMEOUT_S = 10.0
+
+
+@contextlib.contextmanager
+def dask_client(
+    spec: str | None,
+    *,
+    workers: int | None = None,
+    memory_limit: int | None = None,
+    dashboard: bool = True,
+) -> Iterator[Any]:
+    """A ``distributed.Client`` for ``spec``, or None to run in-process; closed on exit.
+
+    Parameters
+    ----------
+    spec : None, ``"local"`` or a scheduler address (``tcp://host:port``)
+    workers : int, optional; worker processes of a local cluster (default: the cores)
+    memory_limit : int, optional; bytes per local worker (default: the available memory
+        shared among them); Dask pauses, then restarts, a worker that goes over it
+    dashboard : bool, serve a local cluster's dashboard (its address is printed)
+
+    Raises
+    ------
+    InputError
+        ``spec`` is neither ``local`` nor an address.
+    DeviceError
+        The scheduler at the address did not answer.
+    """
+    if spec is None:
+        yield None
+        return
+    from distributed import Client, LocalCluster
+
+    if spec == "local":
+        count = workers or os.cpu_count() or 1
+        limit = memory_limit or max(available_memory() // count, 256 << 20)
+        with (
+            LocalCluster(
+                n_workers=count,
+                threads_per_worker=1,
+                processes=True,
+                memory_limit=limit,
+                dashboard_address=":0" if dashboard else None,
+                silence_logs=40,
+            ) as cluster,
+            Client(cluster) as client,
+        ):
+            _announce(client, f"a local Dask cluster of {count} workers, "
+                      f"{format_size(limit)} each")  # fmt: skip
+            yield client
+        return
+    if "://" not in spec:
+        raise InputError(
+            f"--dask {spec!r}: give 'local' (a cluster on this machine) or a scheduler address "
+            "such as tcp://host:8786"
+        )
+    try:
+        client = Client(spec, timeout=CONNECT_TIMEOUT_S)
+    except (OSError, TimeoutError) as error:
+        raise DeviceError(
+            f"the Dask scheduler at {spec} did not answer within {CONNECT_TIMEOUT_S:.0f} s "
+            f"({error}); start it (dask scheduler, then dask worker {spec} on each machine) or "
+            "use --dask local"
+        ) from error
+    with client:
+        workers_seen = len(client.scheduler_info().get("workers", {}))
+        _announce(client, f"the Dask scheduler at {spec} ({workers_seen} workers)")
+        yield client
+
+
+def _announce(client: Any, what: str) -> None:
+    link = getattr(client, "dashboard_link", None)
+    where = f"; dashboard {link}" if link else ""
+    print(f"running on {what}{where}", file=sys.stderr)
+
+
+def gather_with_progress(client: Any, collection: Any, *, progress: bool) -> Any:
+    """Compute a Dask collection (or a list of them) on ``client``, with Dask's progress bar.
+
+    Returns its value (or their values, in order).
+    """
+    futures = client.compute(collection)
+    if progress:
+        from distributed import progress as show_progress
+
+        show_progress(futures)
+        print(file=sys.stderr)  # the bar leaves the cursor on its line
+    return client.gather(futures)
+
+
+def worker_memory(client: Any) -> int | None:
+    """The smallest memory limit (bytes) among the cluster's workers, None when none is set."""
+    limits = [
+        int(info.get("memory_limit") or 0)
+        for info in client.scheduler_info().get("workers", {}).values()
+    ]
+    limits = [limit for limit in limits if limit > 0]
+    return min(limits) if limits else None
