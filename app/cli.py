@@ -26,6 +26,7 @@ from app.cli_args import (
     require_output,
     whole,
 )
+from app.cli_batch import add_batch
 from app.cli_bench import add_bench_parser
 from app.cli_calibrate import add_calibrate
 from app.cli_capture import add_capture
@@ -695,6 +696,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_advise(commands)
     add_evaluate(commands)
     add_fit(commands)
+    add_batch(commands)
     add_bench_parser(commands)
     add_capture(commands)
     add_calibrate(commands)

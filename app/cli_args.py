@@ -11,7 +11,9 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
+from contextlib import AbstractContextManager
 from pathlib import Path
+from typing import Any
 
 from core.atomic import output_problem
 from core.errors import InputError
@@ -207,8 +209,8 @@ def memory_size(text: str) -> int:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
-def add_scale_options(p: argparse.ArgumentParser) -> None:
-    """``--max-memory`` and ``--dask``: how much a stage holds at once, and where it runs."""
+def add_memory_option(p: argparse.ArgumentParser) -> None:
+    """``--max-memory``: how much radiance a stage holds at once."""
     p.add_argument(
         "--max-memory",
         type=memory_size,
@@ -216,6 +218,10 @@ def add_scale_options(p: argparse.ArgumentParser) -> None:
         help="radiance held in memory at once, per process (e.g. 2G; default: a quarter of "
         "the memory available, at most 4 GiB); the peak is about twice this plus the outputs",
     )
+
+
+def add_dask_options(p: argparse.ArgumentParser) -> None:
+    """``--dask`` and the local cluster's size: where a stage runs (:func:`cluster_for`)."""
     p.add_argument(
         "--dask",
         metavar="local|tcp://HOST:PORT",
@@ -235,3 +241,12 @@ def add_scale_options(p: argparse.ArgumentParser) -> None:
         help="--dask local: memory limit of each worker (default: the available memory shared "
         "among them); Dask restarts a worker that goes over it and retries its task",
     )
+
+
+def cluster_for(args: argparse.Namespace) -> AbstractContextManager[Any]:
+    """The Dask client ``--dask`` asks for (None without it), as a context manager."""
+    from core.cluster import dask_client
+
+    if args.dask != "local" and (args.workers or args.worker_memory):
+        raise InputError("--workers and --worker-memory size a local cluster: add --dask local")
+    return dask_client(args.dask, workers=args.workers, memory_limit=args.worker_memory)

@@ -12,8 +12,13 @@ import sys
 import time
 from pathlib import Path
 
-from app.cli_args import add_scale_options, names_among, output_file
-from core.errors import InputError
+from app.cli_args import (
+    add_dask_options,
+    add_memory_option,
+    cluster_for,
+    names_among,
+    output_file,
+)
 
 __all__ = ["add_fit"]
 
@@ -38,13 +43,13 @@ def add_fit(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
         help=f"comma-separated models among {', '.join(MODELS)} (default: by the field's kind)",
     )
     p.add_argument("-o", "--output", type=output_file, help="fit file (default FIELD.models.npz)")
-    add_scale_options(p)
+    add_memory_option(p)
+    add_dask_options(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_run_fit)
 
 
 def _run_fit(args: argparse.Namespace) -> int:
-    from core.cluster import dask_client
     from core.field_store import ReflectanceField
     from core.memory_budget import format_size
     from processing.sample_model_store import default_models_path, write_sample_models
@@ -53,9 +58,7 @@ def _run_fit(args: argparse.Namespace) -> int:
     field = ReflectanceField.open(args.field)
     target = args.output or default_models_path(field.path)
     started = time.perf_counter()
-    if args.dask != "local" and (args.workers or args.worker_memory):
-        raise InputError("--workers and --worker-memory size a local cluster: add --dask local")
-    with dask_client(args.dask, workers=args.workers, memory_limit=args.worker_memory) as client:
+    with cluster_for(args) as client:
         budget = budget_for(args.max_memory, client)
         s, t, p = field.shape
         print(

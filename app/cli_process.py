@@ -13,7 +13,14 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import count, image_size, output_directory, positive
+from app.cli_args import (
+    add_dask_options,
+    cluster_for,
+    count,
+    image_size,
+    output_directory,
+    positive,
+)
 from core.errors import InputError
 
 __all__ = ["add_process"]
@@ -61,6 +68,7 @@ def add_process(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
         action="store_true",
         help="replace a field store already at -o (and the fit saved beside it)",
     )
+    add_dask_options(p)
     p.set_defaults(handler=_run_process)
 
 
@@ -93,24 +101,10 @@ def _sources(args: argparse.Namespace, dataset: Any) -> Any:
 
 def _run_process(args: argparse.Namespace) -> int:
     from capture.dataset import Dataset
-    from processing.process_dataset import process_dataset
 
     dataset = Dataset.open(args.dataset)
-    report = process_dataset(
-        dataset,
-        args.output,
-        _sources(args, dataset),
-        camera_distance=args.camera_distance,
-        fov_deg=args.fov,
-        size=args.size,
-        ignore_calibration=args.ignore_calibration,
-        light_intensity=args.light_intensity,
-        allow_missing=args.allow_missing,
-        dtype=args.dtype,
-        demosaic=args.demosaic,
-        progress=True,
-        overwrite=args.overwrite,
-    )
+    with cluster_for(args) as client:
+        report = _process(args, dataset, client)
     s, t, p = report.shape
     kib = 1024.0 if sys.platform == "darwin" else 1.0  # ru_maxrss: bytes on macOS, else KiB
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / kib / 1024.0
@@ -142,3 +136,24 @@ def _run_process(args: argparse.Namespace) -> int:
             f"(cameras), {report.light_spread_deg:.2f} deg (lights)"
         )
     return 0
+
+
+def _process(args: argparse.Namespace, dataset: Any, client: Any) -> Any:
+    from processing.process_dataset import process_dataset
+
+    return process_dataset(
+        dataset,
+        args.output,
+        _sources(args, dataset),
+        camera_distance=args.camera_distance,
+        fov_deg=args.fov,
+        size=args.size,
+        ignore_calibration=args.ignore_calibration,
+        light_intensity=args.light_intensity,
+        allow_missing=args.allow_missing,
+        dtype=args.dtype,
+        demosaic=args.demosaic,
+        progress=True,
+        overwrite=args.overwrite,
+        client=client,
+    )

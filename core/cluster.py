@@ -65,13 +65,16 @@ def dask_client(
                 threads_per_worker=1,
                 processes=True,
                 memory_limit=limit,
-                dashboard_address=":0" if dashboard else None,
+                # A free port either way: the scheduler's HTTP server (health, metrics) starts
+                # even without the dashboard, and 8787 may be another cluster's.
+                dashboard_address=":0",
+                scheduler_kwargs={"dashboard": dashboard},
                 silence_logs=40,
             ) as cluster,
             Client(cluster) as client,
         ):
             _announce(client, f"a local Dask cluster of {count} workers, "
-                      f"{format_size(limit)} each")  # fmt: skip
+                      f"{format_size(limit)} each", dashboard)  # fmt: skip
             yield client
         return
     if "://" not in spec:
@@ -89,12 +92,12 @@ def dask_client(
         ) from error
     with client:
         workers_seen = len(client.scheduler_info().get("workers", {}))
-        _announce(client, f"the Dask scheduler at {spec} ({workers_seen} workers)")
+        _announce(client, f"the Dask scheduler at {spec} ({workers_seen} workers)", dashboard)
         yield client
 
 
-def _announce(client: Any, what: str) -> None:
-    link = getattr(client, "dashboard_link", None)
+def _announce(client: Any, what: str, dashboard: bool) -> None:
+    link = getattr(client, "dashboard_link", None) if dashboard else None
     where = f"; dashboard {link}" if link else ""
     print(f"running on {what}{where}", file=sys.stderr)
 

@@ -56,6 +56,7 @@ __all__ = [
     "SAMPLE_CHUNK",
     "FieldStoreWriter",
     "ReflectanceField",
+    "SlabWriter",
     "companion_paths",
     "is_field_store",
 ]
@@ -203,19 +204,20 @@ class FieldStoreWriter:
             The slab holds NaN or infinity (or overflows the store's dtype): named by count
             and first sample; nothing is stored.
         """
-        with np.errstate(over="ignore"):  # an overflow becomes infinity, refused below
-            values = np.ascontiguousarray(radiance, dtype=self.radiance.dtype)
-        found = non_finite(values)
-        if found is not None:
-            raise DatasetError(
-                f"{self.path}: camera {camera} light {light}: {found[0]} radiance values are "
-                f"NaN or infinite in {self.radiance.dtype} (the first at sample {found[1][0]}); "
-                "the store keeps finite light only: check the images and calibration"
-            )
-        self.radiance[camera, light] = values
-        self._slab_digests[camera, light] = slab_digest(values)
-        if values.size:
-            self._camera_peaks[camera] = max(self._camera_peaks[camera], float(values.max()))
+        self.record_slab(camera, light, *self.slab_writer().write(camera, light, radiance))
+
+    def slab_writer(self) -> SlabWriter:
+        """A writer of slabs into this store while it is built, for this or another process.
+
+        What it writes counts once recorded here (:meth:`record_slab`): a Dask task writes
+        its slabs and returns their digests and peaks for the building process to record.
+        """
+        return SlabWriter(self.partial, self.path)
+
+    def record_slab(self, camera: int, light: int, digest: bytes, peak: float) -> None:
+        """Count a slab written by a :class:`SlabWriter` (its digest and largest value)."""
+        self._slab_digests[camera, light] = digest
+        self._camera_peaks[camera] = max(self._camera_peaks[camera], peak)
 
     def write_visibility(self, camera: int, visible: NDArray[np.bool_]) -> None:
         """Store which samples (P,) camera ``camera`` sees."""
@@ -265,6 +267,51 @@ class FieldStoreWriter:
         shutil.rmtree(self.partial, ignore_errors=True)
 
 
+@dataclass(frozen=True)
+class SlabWriter:
+    """Writes and reads back slabs of a store being built (:meth:`FieldStoreWriter.slab_writer`).
+
+    Plain paths, so it pickles into a Dask task; every slab is its own chunks, so processes
+    writing different slabs never touch the same file.
+
+    Attributes
+    ----------
+    partial : Path, the store under construction
+    path : Path, the store's final path (named in errors)
+    """
+
+    partial: Path
+    path: Path
+
+    def _radiance(self, mode: str) -> Any:
+        return zarr.open_array(str(self.partial / "radiance"), mode=mode)
+
+    def write(
+        self, camera: int, light: int, radiance: NDArray[np.floating]
+    ) -> tuple[bytes, float]:
+        """Store one slab (P, 3); returns its digest and its largest value (0 when empty).
+
+        Raises DatasetError for NaN or infinity (or an overflow of the store's dtype).
+        """
+        array = self._radiance("r+")
+        with np.errstate(over="ignore"):  # an overflow becomes infinity, refused below
+            values = np.ascontiguousarray(radiance, dtype=array.dtype)
+        found = non_finite(values)
+        if found is not None:
+            raise DatasetError(
+                f"{self.path}: camera {camera} light {light}: {found[0]} radiance values are "
+                f"NaN or infinite in {array.dtype} (the first at sample {found[1][0]}); "
+                "the store keeps finite light only: check the images and calibration"
+            )
+        array[camera, light] = values
+        return slab_digest(values), float(values.max()) if values.size else 0.0
+
+    def read(self, camera: int, light: int) -> NDArray[np.float32]:
+        """A slab (P, 3) written before, as float32."""
+        array = self._radiance("r")
+        return np.asarray(read_checked(self.partial, array, (camera, light)), dtype=np.float32)
+
+
 def _check_target(path: Path, overwrite: bool) -> None:
     if not path.exists():
         return
@@ -284,8 +331,11 @@ def _check_target(path: Path, overwrite: bool) -> None:
 # attributes; radiance is read one camera's slab (T, P, 3) at a time, when relighting needs it,
 # and the most recently used slabs stay in memory.
 
-#: Camera slabs kept in memory by default (a 250k-point, T = 30 slab is 90 MB in float32).
+#: Camera slabs kept in memory by default (a 250k-point, T = 30 slab is 90 MB in float32)...
 CACHED_SLABS = 8
+#: ...and at most this many bytes of them, whatever the field's size (a 2M-point slab is
+#: 720 MB: two stay, not eight).
+CACHED_SLAB_BYTES = 2 << 30
 
 
 @dataclass(eq=False)
@@ -422,7 +472,8 @@ class ReflectanceField:
         """Radiance (T, P, 3), float32, of every sample under every light, seen by ``camera``.
 
         Read from the store on first use (float16 stores are widened: the relighting kernels
-        work in float32) and kept among the ``cached_slabs`` most recent.
+        work in float32) and kept among the ``cached_slabs`` most recent, within
+        :data:`CACHED_SLAB_BYTES` (the newest is always kept).
         """
         s = self.shape[0]
         if not 0 <= camera < s:
@@ -431,7 +482,8 @@ class ReflectanceField:
         if slab is None:
             slab = self.camera_radiance(camera).astype(np.float32)
         self._slabs[camera] = slab
-        while len(self._slabs) > max(self.cached_slabs, 1):
+        room = max(1, min(self.cached_slabs, CACHED_SLAB_BYTES // max(slab.nbytes, 1)))
+        while len(self._slabs) > room:
             self._slabs.popitem(last=False)
         return slab
 
@@ -508,9 +560,18 @@ class ReflectanceField:
                 raise InputError(f"{self.path}: {name} indices must be in 0..{count - 1}")
         if self.image_shape is not None and samples is not None:
             raise InputError(f"{self.path}: a pixel field keeps all its pixels")
-        radiance = np.stack(
-            [self.camera_slab(int(s))[keep_t][:, keep_p] for s in keep_s]
-        )  # (S', T', P', 3) in memory: subsets are small by purpose
+        # (S', T', P', 3) in memory: subsets are small by purpose. Read block by block of the
+        # store's chunks, so a few samples of a large field never bring whole slabs in.
+        radiance = np.empty((len(keep_s), len(keep_t), len(keep_p), 3), dtype=np.float32)
+        step = self.sample_chunk
+        for start in range(0, p_count, step):
+            inside = (keep_p >= start) & (keep_p < start + step)
+            if not inside.any():
+                continue
+            stop = int(keep_p[inside].max()) + 1
+            for row, s in enumerate(keep_s):
+                block = self.camera_radiance(int(s), slice(start, stop))
+                radiance[row][:, inside] = block[keep_t][:, keep_p[inside] - start]
         return ReflectanceField(
             # A path of its own: nothing beside the store (a saved model fit) belongs to it.
             path=self.path.with_name(self.path.name + "[subset]"),

@@ -37,10 +37,9 @@ from tqdm import tqdm
 
 from capture.dataset import Dataset
 from capture.journal import ImageKey
-from capture.manifest import ImageRecord
-from core.camera_model import RigCamera
+from core.camera_model import PinholeCamera, RigCamera
 from core.errors import DatasetError, InputError
-from core.field_store import FieldStoreWriter
+from core.field_store import FieldStoreWriter, SlabWriter
 from core.image_io import Transfer
 from core.splat import CameraSplats, camera_splats, shown_points
 from processing.decode import DecodedImage, decode_image
@@ -49,7 +48,7 @@ from processing.hdr import Exposure, merge_exposures
 from processing.interpolation import interpolation_weights
 from processing.point_cloud import PointCloud
 
-__all__ = ["FieldBuildReport", "build_field", "sample_view"]
+__all__ = ["CameraJob", "CameraResult", "FieldBuildReport", "build_field", "sample_view"]
 
 
 @dataclass(frozen=True)
@@ -138,12 +137,6 @@ def sample_view(
     return out.astype(np.float32)
 
 
-def _decode(
-    record: ImageRecord, dataset: Dataset, shape: tuple[int, int], **options: Any
-) -> DecodedImage:
-    return decode_image(dataset.image_path(record), expected_shape=shape, **options)
-
-
 def build_field(
     dataset: Dataset | str | os.PathLike[str],
     output: str | os.PathLike[str],
@@ -162,6 +155,7 @@ def build_field(
     progress: bool = False,
     overwrite: bool = False,
     exclude: Collection[ImageKey] = (),
+    client: Any = None,
 ) -> FieldBuildReport:
     """Build the reflectance field store of a capture dataset, streaming image by image.
 
@@ -186,6 +180,9 @@ def build_field(
     progress : bool, show a tqdm progress bar
     overwrite : bool, replace a store already at ``output`` (and the fit saved beside it)
     exclude : image keys to leave out, as if never taken (files found missing or corrupt)
+    client : distributed.Client, optional
+        Build each camera pose as a Dask task on its cluster (the workers read the images and
+        write their slabs into the store under construction); the store is the same.
 
     Returns
     -------
@@ -254,50 +251,40 @@ def build_field(
     )
     options = {"demosaic": demosaic, "transfer": transfer}
     s_count, t_count, p_count = len(layout.cameras), len(layout.light_indices), len(cloud.points)
+    jobs = []
+    for s, pinhole in enumerate(layout.cameras):
+        brackets = {t: [(data.image_path(r), r.exposure_ms) for r in records]
+                    for (c, t), records in layout.brackets.items() if c == s}  # fmt: skip
+        darks = {key: data.image_path(r) for (c, key), r in layout.darks.items() if c == s}
+        scales = (radiance_scale * layout.intensities).astype(np.float32)
+        jobs.append(CameraJob(s, pinhole, brackets, darks, layout.light_directions, scales,
+                              options, store.slab_writer()))  # fmt: skip
     counts = {"exposures": 0, "darks": 0, "without_dark": 0, "visible": 0, "saturated": 0}
-    bar = tqdm(total=s_count * t_count, desc="process", unit="image", disable=not progress)
     try:
-        for s, pinhole in enumerate(layout.cameras):
-            shape = (pinhole.height, pinhole.width)
-            splats = camera_splats(cloud.points, cloud.normals, pinhole, cloud.spacing)
-            visible = shown_points(splats)
-            store.write_visibility(s, visible)
-            index = np.flatnonzero(visible)
-            counts["visible"] += len(index)
-            darks: dict[float, DecodedImage] = {}
-            taken: dict[int, NDArray[np.float32]] = {}
-            for t in range(t_count):
-                bracket = layout.brackets.get((s, t))
-                if bracket is None:
-                    bar.update()
-                    continue
-                exposures = []
-                for record in bracket:
-                    key = round(record.exposure_ms, 9)
-                    dark_record = layout.darks.get((s, key))
-                    if dark_record is not None and key not in darks:
-                        darks[key] = _decode(dark_record, data, shape, **options)
-                        counts["darks"] += 1
-                    counts["without_dark"] += dark_record is None
-                    image = _decode(record, data, shape, **options)
-                    exposures.append(Exposure(image, record.exposure_ms, darks.get(key)))
-                counts["exposures"] += len(exposures)
-                merged = merge_exposures(exposures)
-                scale = radiance_scale * layout.intensities[t]
-                slab = np.zeros((p_count, 3), dtype=np.float32)
-                slab[index] = sample_view(merged.rate, splats, index) / scale.astype(np.float32)
-                clipped = sample_view(merged.saturated.astype(np.float32), splats, index) > 0
-                counts["saturated"] += int(clipped.sum())
-                store.write_slab(s, t, slab)
-                taken[t] = slab
+        if client is None:
+            bar = tqdm(total=s_count, desc="process", unit="camera", disable=not progress)
+            built = []
+            for job in jobs:
+                built.append(job.build(cloud))
                 bar.update()
-            for t in set(range(t_count)) - set(taken):
-                store.write_slab(s, t, _interpolated_slab(layout.light_directions, taken, t))
+            bar.close()
+        else:
+            from dask.delayed import delayed
+
+            from core.cluster import gather_with_progress
+
+            shared = client.scatter(cloud, broadcast=True)  # the points go to each worker once
+            tasks = [delayed(CameraJob.build, pure=True)(job, shared) for job in jobs]
+            built = gather_with_progress(client, tasks, progress=progress)
+        for result in built:
+            store.write_visibility(result.camera, result.visible)
+            for t, (digest, peak) in result.slabs.items():
+                store.record_slab(result.camera, t, digest, peak)
+            for key, value in result.counts.items():
+                counts[key] += value
     except BaseException:
         store.abort()
         raise
-    finally:
-        bar.close()
     store.finish()
     visible_total = max(counts["visible"], 1)
     return FieldBuildReport(
@@ -317,18 +304,100 @@ def build_field(
     )
 
 
-def _interpolated_slab(
-    directions: NDArray[np.floating], taken: Mapping[int, NDArray[np.float32]], missing: int
-) -> NDArray[np.float32]:
-    """The slab of light ``missing`` interpolated (barycentric) from the camera's taken ones."""
+@dataclass(frozen=True)
+class CameraResult:
+    """What one camera's task built: its visibility, its slabs' digests and peaks, counts."""
+
+    camera: int
+    visible: NDArray[np.bool_]
+    slabs: dict[int, tuple[bytes, float]]
+    counts: dict[str, int]
+
+
+@dataclass(frozen=True, eq=False)
+class CameraJob:
+    """One camera pose's part of a field: every light's bracket decoded, merged and sampled.
+
+    Plain data (image paths, not the dataset), so a Dask task carries it; the slabs go
+    straight into the store under construction (:class:`core.field_store.SlabWriter`) and
+    only their digests come back. In memory at a time: one camera's dark frames, one
+    bracket and one slab; a slab the capture lacks is interpolated from three written ones,
+    read back from the store.
+
+    Attributes
+    ----------
+    camera : int, the field's camera row s
+    pinhole : PinholeCamera of that pose
+    brackets : dict of light row t to its exposures' (image path, exposure_ms)
+    darks : dict of exposure_ms (rounded to 1e-9) to the dark frame's path
+    light_directions : ndarray, shape (T, 3), toward each light
+    scales : ndarray, shape (T, 3), float32, radiance_scale x each light's intensity
+    options : decode options (demosaic, transfer)
+    slabs : SlabWriter of the store
+    """
+
+    camera: int
+    pinhole: PinholeCamera
+    brackets: dict[int, list[tuple[Path, float]]]
+    darks: dict[float, Path]
+    light_directions: NDArray[np.float64]
+    scales: NDArray[np.float32]
+    options: dict[str, Any]
+    slabs: SlabWriter
+
+    def build(self, cloud: PointCloud) -> CameraResult:
+        """Write this camera's visibility-sampled slabs; returns what the writer records."""
+        shape = (self.pinhole.height, self.pinhole.width)
+        t_count, p_count = len(self.light_directions), len(cloud.points)
+        splats = camera_splats(cloud.points, cloud.normals, self.pinhole, cloud.spacing)
+        visible = shown_points(splats)
+        index = np.flatnonzero(visible)
+        counts = {"exposures": 0, "darks": 0, "without_dark": 0, "visible": len(index),
+                  "saturated": 0}  # fmt: skip
+        darks: dict[float, DecodedImage] = {}
+        written: dict[int, tuple[bytes, float]] = {}
+        for t in range(t_count):
+            bracket = self.brackets.get(t)
+            if bracket is None:
+                continue
+            exposures = []
+            for path, exposure_ms in bracket:
+                key = round(exposure_ms, 9)
+                dark_path = self.darks.get(key)
+                if dark_path is not None and key not in darks:
+                    darks[key] = decode_image(dark_path, expected_shape=shape, **self.options)
+                    counts["darks"] += 1
+                counts["without_dark"] += dark_path is None
+                image = decode_image(path, expected_shape=shape, **self.options)
+                exposures.append(Exposure(image, exposure_ms, darks.get(key)))
+            counts["exposures"] += len(exposures)
+            merged = merge_exposures(exposures)
+            slab = np.zeros((p_count, 3), dtype=np.float32)
+            slab[index] = sample_view(merged.rate, splats, index) / self.scales[t]
+            clipped = sample_view(merged.saturated.astype(np.float32), splats, index) > 0
+            counts["saturated"] += int(clipped.sum())
+            written[t] = self.slabs.write(self.camera, t, slab)
+        for t in sorted(set(range(t_count)) - set(written)):
+            slab = _interpolated_slab(self, sorted(written), t)
+            written[t] = self.slabs.write(self.camera, t, slab)
+        return CameraResult(self.camera, visible, written, counts)
+
+
+def _interpolated_slab(job: CameraJob, taken: list[int], missing: int) -> NDArray[np.float32]:
+    """The slab of light ``missing`` interpolated (barycentric) from the camera's taken ones.
+
+    ``taken`` are lights whose slabs this camera wrote (measured ones); the three the
+    weights name are read back from the store.
+    """
     if not taken:
         raise DatasetError(f"a camera pose has no light images to interpolate light {missing}")
-    have = sorted(taken)
-    measured = np.asarray(directions, dtype=np.float64)[have]
+    directions = np.asarray(job.light_directions, dtype=np.float64)
     weights = interpolation_weights(
-        measured, np.asarray(directions, dtype=np.float64)[missing : missing + 1], "barycentric"
+        directions[taken], directions[missing : missing + 1], "barycentric"
     )
-    slab = np.zeros_like(taken[have[0]])
+    slab: NDArray[np.float32] | None = None
     for j, w in zip(weights.indices[0], weights.weights[0], strict=True):
-        slab += np.float32(w) * taken[have[int(j)]]
+        part = np.float32(w) * job.slabs.read(job.camera, taken[int(j)])
+        slab = part if slab is None else slab + part
+    assert slab is not None
     return slab

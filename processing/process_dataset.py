@@ -158,6 +158,7 @@ def process_dataset(
     demosaic: str = "linear",
     progress: bool = False,
     overwrite: bool = False,
+    client: Any = None,
 ) -> FieldBuildReport:
     """Build the field store of a dataset (``rig process``).
 
@@ -169,7 +170,7 @@ def process_dataset(
     camera_distance, fov_deg, size : the camera model where the dataset does not say it (see
         :func:`dataset_camera_model`)
     ignore_calibration : bool, use the measured poses, not the manifest's calibration
-    light_intensity, allow_missing, dtype, demosaic, progress, overwrite : see
+    light_intensity, allow_missing, dtype, demosaic, progress, overwrite, client : see
         :func:`processing.field_builder.build_field`
 
     Raises
@@ -209,6 +210,7 @@ def process_dataset(
         progress=progress,
         overwrite=overwrite,
         exclude={record.key for record in check.missing},
+        client=client,
     )
     planned_cameras = {key.camera_index for key in data.planned or () if key.kind == "light"}
     built = set(report.camera_indices)

@@ -79,7 +79,8 @@ def test_a_truncated_chunk_names_the_store_and_the_chunk(
     with pytest.raises(DatasetError) as error:
         field.camera_slab(2)
     message = str(error.value)
-    assert message.startswith(f"{store}: cannot read camera 2 light 1 sample block 0 (radiance/c/2/1/0/0)")
+    where = "camera 2 light 1 sample block 0 (radiance/c/2/1/0/0)"
+    assert message.startswith(f"{store}: cannot read {where}")
     assert "damaged" in message
     assert error.value.__cause__ is None and error.value.__suppress_context__
     assert main(["verify", str(store), "--quiet"]) == 1

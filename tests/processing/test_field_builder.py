@@ -328,3 +328,35 @@ def test_point_clouds_read_from_npz_and_ply(tmp_path: Path) -> None:
     with pytest.raises(DatasetError, match=r"cloud.xyz"):
         (tmp_path / "cloud.xyz").write_text("0 0 0")
         read_point_cloud(tmp_path / "cloud.xyz")
+
+
+def test_a_build_on_a_local_cluster_is_the_same_store(tmp_path: Path) -> None:
+    from core.cluster import dask_client
+
+    import json
+
+    capture = make_capture(tmp_path, points=2_000)
+    gone = "images/light_c2_l3_e0.tif"  # one slab interpolated from the camera's others
+    (capture.path / gone).unlink()
+    manifest = capture.path / "manifest.json"
+    document = json.loads(manifest.read_text())
+    document["images"] = [r for r in document["images"] if r["file"] != gone]
+    manifest.write_text(json.dumps(document))
+    here = _build(capture, tmp_path / "here.zarr", allow_missing=True)
+    with dask_client("local", workers=2, memory_limit=512 << 20, dashboard=False) as client:
+        there = _build(capture, tmp_path / "there.zarr", allow_missing=True, client=client)
+        bad = capture.path / "images" / "light_c1_l1_e0.tif"
+        bad.write_bytes(bad.read_bytes()[:300])
+        with pytest.raises(DecodeError, match=r"light_c1_l1_e0.tif"):
+            _build(capture, tmp_path / "broken.zarr", allow_missing=True, client=client)
+    a, b = (
+        ReflectanceField.open(tmp_path / "here.zarr"),
+        ReflectanceField.open(tmp_path / "there.zarr"),
+    )
+    assert a.radiance_digest == b.radiance_digest is not None
+    np.testing.assert_array_equal(a.load(), b.load())
+    np.testing.assert_array_equal(a.visibility, b.visibility)
+    assert (here.exposures, here.missing, here.visible_fraction) == (
+        there.exposures, there.missing, there.visible_fraction)  # fmt: skip
+    assert not (tmp_path / "broken.zarr").exists()
+    assert [p.name for p in tmp_path.iterdir() if "partial" in p.name] == []

@@ -63,6 +63,28 @@ def test_the_store_is_chunked_by_samples_and_reads_blocks_across_chunks(store: P
     assert check_store(store).digest == "matches"
 
 
+def test_a_subset_reads_its_samples_across_chunks(store: Path) -> None:
+    field = ReflectanceField.open(store)
+    keep = np.sort(np.random.default_rng(1).choice(3000, size=400, replace=False))
+    part = field.subset(cameras=np.array([4, 1]), lights=np.array([3, 0, 9]), samples=keep)
+    whole = field.load().astype(np.float32)
+    np.testing.assert_array_equal(part.radiance, whole[[4, 1]][:, [3, 0, 9]][:, :, keep])
+    np.testing.assert_array_equal(part.visibility, field.visibility[[4, 1]][:, keep])
+
+
+def test_the_slab_cache_keeps_to_its_byte_budget(
+    store: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import core.field_store
+
+    field = ReflectanceField.open(store, cached_slabs=8)
+    slab_bytes = field.camera_slab(0).nbytes
+    monkeypatch.setattr(core.field_store, "CACHED_SLAB_BYTES", 2 * slab_bytes + 1)
+    for camera in range(6):
+        field.camera_slab(camera)
+    assert list(field._slabs) == [4, 5]  # the two newest
+
+
 def test_blocks_follow_the_budget_and_the_chunks(store: Path) -> None:
     field = ReflectanceField.open(store)
     assert sample_block_size(field, 2 * CHUNK * BYTES_PER_SAMPLE + 5) == 2 * CHUNK
