@@ -14,13 +14,20 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import Any
+
+from tqdm import tqdm
 
 from core.errors import DeviceError, InputError
 from core.memory_budget import available_memory, format_size
 
-__all__ = ["CONNECT_TIMEOUT_S", "dask_client", "gather_with_progress", "worker_memory"]
+__all__ = [
+    "CONNECT_TIMEOUT_S",
+    "compute_each",
+    "dask_client",
+    "worker_memory",
+]
 
 #: Seconds to wait for an existing scheduler to answer before giving up.
 CONNECT_TIMEOUT_S = 10.0
@@ -102,18 +109,31 @@ def _announce(client: Any, what: str, dashboard: bool) -> None:
     print(f"running on {what}{where}", file=sys.stderr)
 
 
-def gather_with_progress(client: Any, collection: Any, *, progress: bool) -> Any:
-    """Compute a Dask collection (or a list of them) on ``client``, with Dask's progress bar.
+def compute_each(
+    client: Any, tasks: Sequence[Any], *, progress: bool, what: str = "tasks"
+) -> Iterator[tuple[int, Any]]:
+    """Compute Dask delayed ``tasks`` on ``client``; yield (index, value) as each finishes.
 
-    Returns its value (or their values, in order).
+    The caller keeps each value as it comes and drops it, so the client never holds every
+    task's result at once (a fit's blocks, a build's cameras). A progress bar counts the
+    finished tasks; a task's error is raised here, the others are cancelled.
     """
-    futures = client.compute(collection)
-    if progress:
-        from distributed import progress as show_progress
+    from distributed import as_completed
 
-        show_progress(futures)
-        print(file=sys.stderr)  # the bar leaves the cursor on its line
-    return client.gather(futures)
+    futures = client.compute(list(tasks))
+    index = {future.key: i for i, future in enumerate(futures)}
+    bar = tqdm(total=len(futures), desc=what, unit="task", disable=not progress)
+    try:
+        for future in as_completed(futures):
+            value = future.result()
+            bar.update()
+            yield index[future.key], value
+            future.release()
+    except BaseException:
+        client.cancel(futures)
+        raise
+    finally:
+        bar.close()
 
 
 def worker_memory(client: Any) -> int | None:

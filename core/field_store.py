@@ -65,10 +65,13 @@ FIELD_SCHEMA_VERSION = 1
 
 #: Samples per radiance chunk. Building writes and relighting reads whole (camera, light)
 #: slabs; fitting and evaluation read every slab's part for a block of samples. Measured on
-#: this 2-core machine (``bench.scale``, 1M samples, float16): against one chunk per slab,
-#: 65,536 samples writes slabs at 0.8x the speed, reads a camera at the same, and reads a
-#: block of samples 4.5x faster (the whole slab is no longer decompressed for a part of it).
-#: Stores written before with one chunk per slab read as they are.
+#: this 2-core machine (``python -m bench.scale --chunking``, 1M samples of a simulated
+#: sphere, float16, two runs): against one chunk per slab, 65,536 samples writes slabs at
+#: 0.84-0.90x the speed and reads a camera at 0.64-0.75x (540-580 MB/s), and reads a block of
+#: samples 2.0-2.2x faster (the whole slab is no longer decompressed for a part of it); 262,144
+#: reads cameras faster but blocks slower, and a block that size (2.8 GB in float32 at
+#: S = T = 30) is more than a fit's default budget. Stores written before with one chunk per
+#: slab read as they are.
 SAMPLE_CHUNK = 65536
 
 
@@ -284,11 +287,12 @@ class SlabWriter:
     path: Path
 
     def _radiance(self, mode: str) -> Any:
-        return zarr.open_array(str(self.partial / "radiance"), mode=mode)
+        # write_empty_chunks is a setting of the opened array, not of the store: without it a
+        # black part of a slab would not be written, and read as damage (a missing chunk).
+        array = zarr.open_array(str(self.partial / "radiance"), mode=mode)
+        return array.with_config({"write_empty_chunks": True})
 
-    def write(
-        self, camera: int, light: int, radiance: NDArray[np.floating]
-    ) -> tuple[bytes, float]:
+    def write(self, camera: int, light: int, radiance: NDArray[np.floating]) -> tuple[bytes, float]:
         """Store one slab (P, 3); returns its digest and its largest value (0 when empty).
 
         Raises DatasetError for NaN or infinity (or an overflow of the store's dtype).

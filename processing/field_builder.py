@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Collection, Mapping
+from collections.abc import Collection, Iterator, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -261,22 +261,7 @@ def build_field(
                               options, store.slab_writer()))  # fmt: skip
     counts = {"exposures": 0, "darks": 0, "without_dark": 0, "visible": 0, "saturated": 0}
     try:
-        if client is None:
-            bar = tqdm(total=s_count, desc="process", unit="camera", disable=not progress)
-            built = []
-            for job in jobs:
-                built.append(job.build(cloud))
-                bar.update()
-            bar.close()
-        else:
-            from dask.delayed import delayed
-
-            from core.cluster import gather_with_progress
-
-            shared = client.scatter(cloud, broadcast=True)  # the points go to each worker once
-            tasks = [delayed(CameraJob.build, pure=True)(job, shared) for job in jobs]
-            built = gather_with_progress(client, tasks, progress=progress)
-        for result in built:
+        for result in _built_cameras(jobs, cloud, client, progress):
             store.write_visibility(result.camera, result.visible)
             for t, (digest, peak) in result.slabs.items():
                 store.record_slab(result.camera, t, digest, peak)
@@ -302,6 +287,24 @@ def build_field(
         seconds=time.perf_counter() - started,
         camera_indices=layout.camera_indices,
     )
+
+
+def _built_cameras(
+    jobs: list[CameraJob], cloud: PointCloud, client: Any, progress: bool
+) -> Iterator[CameraResult]:
+    """Each camera's result as it is built: in turn here, or as Dask tasks finish."""
+    if client is None:
+        for job in tqdm(jobs, desc="process", unit="camera", disable=not progress):
+            yield job.build(cloud)
+        return
+    from dask.delayed import delayed
+
+    from core.cluster import compute_each
+
+    shared = client.scatter(cloud, broadcast=True)  # the points go to each worker once
+    tasks = [delayed(CameraJob.build, pure=True)(job, shared) for job in jobs]
+    for _, result in compute_each(client, tasks, progress=progress, what="process"):
+        yield result
 
 
 @dataclass(frozen=True)

@@ -117,12 +117,13 @@ def relight_batch(
         else:
             from dask.delayed import delayed
 
-            from core.cluster import gather_with_progress
+            from core.cluster import compute_each
 
             tasks = [
                 delayed(relight_environment, pure=True)(plan, i, str(partial)) for i in indices
             ]
-            gather_with_progress(client, tasks, progress=progress)
+            for _ in compute_each(client, tasks, progress=progress, what="environments"):
+                pass  # each task wrote its frames
     except BaseException:
         shutil.rmtree(partial, ignore_errors=True)
         raise

@@ -1,7 +1,8 @@
 """Fitting a field's per-sample models: :func:`fit_sample_models`.
 
 :func:`fit_sample_models` checks the request, fits the linear bases, finds the starting normals
-and runs the parametric kernel over memory-bounded chunks of samples.
+and runs the parametric kernel over memory-bounded blocks of samples, in-process or as Dask
+tasks (one per block).
 """
 
 from __future__ import annotations
@@ -246,7 +247,7 @@ def _fit_parametric(
     else:
         from dask.delayed import delayed
 
-        from core.cluster import gather_with_progress
+        from core.cluster import compute_each
 
         tasks = [
             delayed(_fit_stored_block, pure=True)(
@@ -254,9 +255,8 @@ def _fit_parametric(
             )
             for start, stop in blocks
         ]
-        for (start, stop), fitted in zip(
-            blocks, gather_with_progress(client, tasks, progress=progress), strict=True
-        ):
+        for index, fitted in compute_each(client, tasks, progress=progress, what="fit"):
+            start, stop = blocks[index]
             _place(outputs, fitted, slice(start, stop))
     fits: dict[str, ParametricFit] = {}
     for name in names:

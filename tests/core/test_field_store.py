@@ -98,3 +98,24 @@ def test_a_store_is_put_in_place_only_when_complete(tmp_path: Path) -> None:
     assert kept.radiance_digest == digest and float(kept.load().max()) == 2.0
     with pytest.raises(InputError, match="already there"):
         writer()
+
+
+def test_a_black_part_of_a_slab_is_written_not_left_out(tmp_path: Path) -> None:
+    # A slab of several chunks whose second block is black (samples no camera sees): the
+    # writer must store that chunk, or the store would read as damaged (a missing chunk).
+    from core.field_integrity import check_store
+
+    points = np.random.default_rng(0).normal(size=(10, 3)).astype(np.float32)
+    writer = FieldStoreWriter(
+        tmp_path / "f.zarr", points=points, normals=points, light_directions=np.eye(3)[:1],
+        cameras=field_cameras(1), sample_chunk=4,
+    )  # fmt: skip
+    slab = np.zeros((10, 3), dtype=np.float32)
+    slab[:4] = 1.0
+    writer.write_slab(0, 0, slab)
+    writer.write_visibility(0, slab[:, 0] > 0)
+    path = writer.finish()
+    field = ReflectanceField.open(path)
+    assert field.radiance.chunks == (1, 1, 4, 3)
+    np.testing.assert_array_equal(field.camera_slab(0)[0], slab)
+    assert check_store(path).ok

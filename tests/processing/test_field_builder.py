@@ -331,9 +331,9 @@ def test_point_clouds_read_from_npz_and_ply(tmp_path: Path) -> None:
 
 
 def test_a_build_on_a_local_cluster_is_the_same_store(tmp_path: Path) -> None:
-    from core.cluster import dask_client
-
     import json
+
+    from core.cluster import dask_client
 
     capture = make_capture(tmp_path, points=2_000)
     gone = "images/light_c2_l3_e0.tif"  # one slab interpolated from the camera's others
