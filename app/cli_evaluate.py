@@ -11,7 +11,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import names_among, output_file, require_output
+from app.cli_args import add_dask_options, cluster_for, names_among, output_file, require_output
 from core.errors import InputError
 
 __all__ = ["add_evaluate", "add_transfer_option", "relight_lights"]
@@ -62,6 +62,7 @@ def add_evaluate(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--markdown", type=output_file, help="write the table here (Markdown)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_transfer_option(p)
+    add_dask_options(p)
     p.set_defaults(handler=_run_evaluate)
 
 
@@ -110,9 +111,9 @@ def _run_evaluate(args: argparse.Namespace) -> int:
                 names = _lp_names(args.test)
             else:
                 raise InputError(f"{args.test}: give an .lp file or a field store")
-        result = evaluate(
-            fit, test, args.methods, mask=mask, test_names=names, progress=not args.quiet
-        )
+        with cluster_for(args) as client:
+            result = evaluate(fit, test, args.methods, mask=mask, test_names=names,
+                              progress=not args.quiet, client=client)  # fmt: skip
     result = dataclasses.replace(result, field=str(args.field), test=where)
     table = result.markdown()
     print(table, end="")

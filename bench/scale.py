@@ -188,7 +188,8 @@ def sweep_estimate(
         ("build: write the float16 store", field_bytes / write_rate, sweep_obs, "slabs"),
         ("fit (lambert, lambert+ggx)", SWEEP["samples"] * sweep_obs / fit_rate,
          -(-SWEEP["samples"] // 65536), "blocks of 65,536 samples"),
-        ("relight 50 environments x 36 frames", 50 * 36 * frame, 50, "environments"),
+        ("relight: open the models, one frame; 50 environments", 50 * frame, 50,
+         "environments"),
     ]  # fmt: skip
     return [
         {"stage": name, "one_machine_hours": seconds / 3600, "tasks": int(tasks), "task": task,

@@ -19,7 +19,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from core.errors import DeviceError, InputError
+from core.errors import ClusterError, InputError
 from core.memory_budget import available_memory, format_size
 
 __all__ = [
@@ -55,7 +55,7 @@ def dask_client(
     ------
     InputError
         ``spec`` is neither ``local`` nor an address.
-    DeviceError
+    ClusterError
         The scheduler at the address did not answer.
     """
     if spec is None:
@@ -80,7 +80,8 @@ def dask_client(
             ) as cluster,
             Client(cluster) as client,
         ):
-            _announce(client, f"a local Dask cluster of {count} workers, "
+            workers_text = f"{count} worker{'s' if count != 1 else ''}"
+            _announce(client, f"a local Dask cluster of {workers_text}, "
                       f"{format_size(limit)} each", dashboard)  # fmt: skip
             yield client
         return
@@ -92,7 +93,7 @@ def dask_client(
     try:
         client = Client(spec, timeout=CONNECT_TIMEOUT_S)
     except (OSError, TimeoutError) as error:
-        raise DeviceError(
+        raise ClusterError(
             f"the Dask scheduler at {spec} did not answer within {CONNECT_TIMEOUT_S:.0f} s "
             f"({error}); start it (dask scheduler, then dask worker {spec} on each machine) or "
             "use --dask local"
@@ -121,13 +122,13 @@ def compute_each(
     from distributed import as_completed
 
     futures = client.compute(list(tasks))
-    index = {future.key: i for i, future in enumerate(futures)}
+    index = {id(future): i for i, future in enumerate(futures)}
     bar = tqdm(total=len(futures), desc=what, unit="task", disable=not progress)
     try:
         for future in as_completed(futures):
             value = future.result()
             bar.update()
-            yield index[future.key], value
+            yield index[id(future)], value
             future.release()
     except BaseException:
         client.cancel(futures)

@@ -46,3 +46,7 @@ class ConfigError(InputError):
 
 class DatasetError(RigError):
     """A capture dataset or reflectance-field store is missing, corrupt or inconsistent."""
+
+
+class ClusterError(RigError):
+    """The Dask cluster a stage was sent to cannot be reached."""

@@ -456,6 +456,13 @@ class ReflectanceField:
             cached_slabs=cached_slabs,
         )
 
+    def __getstate__(self) -> dict[str, Any]:
+        # Pickled into a Dask task: the store is reopened by its path there, the slab cache
+        # stays behind (a subset's radiance, in memory, goes along).
+        state = dict(self.__dict__)
+        state["_slabs"] = OrderedDict()
+        return state
+
     @property
     def shape(self) -> tuple[int, int, int]:
         """(S, T, P): cameras, lights, samples."""

@@ -348,6 +348,63 @@ class _Views:
         return self._plans[camera]
 
 
+def _test_images(
+    test: ReflectanceField, views: _Views
+) -> dict[tuple[int, int], NDArray[np.float32]]:
+    """The measured test images, by (camera, test light)."""
+    s_count, t_test, _ = test.shape
+    truth = {s: test.camera_slab(s) for s in range(s_count)}
+    return {(s, q): views.image(s, truth[s][q]) for s in range(s_count) for q in range(t_test)}
+
+
+def _score_method(
+    fit: ReflectanceField,
+    test: ReflectanceField,
+    name: str,
+    scale: float,
+    views: _Views,
+    images: dict[tuple[int, int], NDArray[np.float32]],
+) -> MethodResult:
+    """One method's predictions of every test image, scored (see :func:`evaluate`)."""
+    s_count, t_test, _ = test.shape
+    start = time.perf_counter()
+    try:
+        predictor = make_predictor(fit, name, scale=scale)
+        predicted = {s: predictor.predict(s, test.light_directions) for s in range(s_count)}
+    except RigError as error:
+        return MethodResult(name, None, (), 0.0, 0.0, f"not applicable: {error}")
+    elapsed = time.perf_counter() - start
+    again = time.perf_counter()  # fitted now: what one more image costs
+    predictor.predict(0, test.light_directions[:1])
+    per_image_ms = 1000.0 * (time.perf_counter() - again)
+    scores = tuple(
+        image_quality(views.image(s, predicted[s][q]), images[s, q], views.pixels(s), scale=scale)
+        for s in range(s_count)
+        for q in range(t_test)
+    )
+    mean = ImageQuality(
+        psnr=_psnr_of_mean_mse([q.psnr for q in scores]),
+        ssim=float(np.mean([q.ssim for q in scores])),
+        delta_e=float(np.mean([q.delta_e for q in scores])),
+        rel_rmse=float(np.mean([q.rel_rmse for q in scores])),
+    )
+    sigma = getattr(predictor, "sigma", None)
+    note = f"sigma {sigma:.3g}" if isinstance(sigma, float) else ""
+    return MethodResult(name, mean, scores, elapsed, per_image_ms, note)
+
+
+def _score_on_worker(
+    fit: ReflectanceField,
+    test: ReflectanceField,
+    name: str,
+    scale: float,
+    mask: NDArray[np.bool_] | None,
+) -> MethodResult:
+    """A Dask task: one method scored, the test images made again on the worker."""
+    views = _Views(test, mask)
+    return _score_method(fit, test, name, scale, views, _test_images(test, views))
+
+
 def evaluate(
     fit: ReflectanceField,
     test: ReflectanceField,
@@ -357,6 +414,7 @@ def evaluate(
     mask: NDArray[np.bool_] | None = None,
     test_names: Sequence[str] | None = None,
     progress: bool = False,
+    client: Any = None,
 ) -> Evaluation:
     """Score every method's predictions of ``test``'s lights from ``fit``'s.
 
@@ -369,6 +427,8 @@ def evaluate(
     mask : ndarray (H, W) of bool, optional (pixel fields), the pixels that count
     test_names : names of the test lights (default ``light N``)
     progress : bool, a bar over the methods
+    client : distributed.Client, optional; one Dask task per method on its cluster (the
+        scores are the same; the times are the workers')
 
     Returns
     -------
@@ -378,43 +438,32 @@ def evaluate(
     _check_pair(fit, test)
     if fit.image_shape is None and mask is not None:
         raise InputError("a mask applies to a field of pixels")
-    s_count, t_test, _ = test.shape
     views = _Views(test, mask)
-    truth = {s: test.camera_slab(s) for s in range(s_count)}
-    images = {(s, q): views.image(s, truth[s][q]) for s in range(s_count) for q in range(t_test)}
+    images = _test_images(test, views)
     if scale is None:
         rti = fit.provenance.get("source") == "rti" or test.provenance.get("source") == "rti"
         stack = np.concatenate([images[key][views.pixels(key[0])] for key in images])
         scale = 1.0 if rti else display_scale(stack)
-    results = []
-    for name in tqdm(methods, desc="evaluate", unit="method", disable=not progress):
-        start = time.perf_counter()
-        try:
-            predictor = make_predictor(fit, name, scale=scale)
-            predicted = {s: predictor.predict(s, test.light_directions) for s in range(s_count)}
-        except RigError as error:
-            results.append(MethodResult(name, None, (), 0.0, 0.0, f"not applicable: {error}"))
-            continue
-        elapsed = time.perf_counter() - start
-        again = time.perf_counter()  # fitted now: what one more image costs
-        predictor.predict(0, test.light_directions[:1])
-        per_image_ms = 1000.0 * (time.perf_counter() - again)
-        scores = tuple(
-            image_quality(
-                views.image(s, predicted[s][q]), images[s, q], views.pixels(s), scale=scale
-            )
-            for s in range(s_count)
-            for q in range(t_test)
+    if client is None:
+        results = [
+            _score_method(fit, test, name, scale, views, images)
+            for name in tqdm(methods, desc="evaluate", unit="method", disable=not progress)
+        ]
+    else:
+        from dask.delayed import delayed
+
+        from core.cluster import compute_each
+
+        # One task per method; each worker rebuilds the test images (the fields go along
+        # pickled: a store by its path, a subset with its radiance).
+        fields = client.scatter([fit, test], broadcast=True)
+        tasks = [delayed(_score_on_worker, pure=True)(*fields, name, scale, mask)
+                 for name in methods]  # fmt: skip
+        scored: dict[int, MethodResult] = dict(
+            compute_each(client, tasks, progress=progress, what="evaluate")
         )
-        mean = ImageQuality(
-            psnr=_psnr_of_mean_mse([q.psnr for q in scores]),
-            ssim=float(np.mean([q.ssim for q in scores])),
-            delta_e=float(np.mean([q.delta_e for q in scores])),
-            rel_rmse=float(np.mean([q.rel_rmse for q in scores])),
-        )
-        sigma = getattr(predictor, "sigma", None)
-        note = f"sigma {sigma:.3g}" if isinstance(sigma, float) else ""
-        results.append(MethodResult(name, mean, scores, elapsed, per_image_ms, note))
+        results = [scored[i] for i in range(len(methods))]
+    s_count, t_test, _ = test.shape
     names = (
         tuple(test_names) if test_names is not None else tuple(f"light {q}" for q in range(t_test))
     )

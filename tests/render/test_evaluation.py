@@ -107,3 +107,29 @@ def test_a_test_of_other_views_is_refused(
         evaluate(glossy[0], ReflectanceField.open(other), ["nearest"])
     with pytest.raises(InputError, match="a mask applies to a field of pixels"):
         evaluate(glossy[0], glossy[1], ["nearest"], mask=np.ones((32, 32), dtype=bool))
+
+
+def test_a_local_cluster_scores_the_same(
+    glossy: tuple[ReflectanceField, ...], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from app.cli import main
+    from core.cluster import dask_client
+
+    fit, test = glossy
+    split = fit.subset(lights=np.arange(0, 30, 2))  # a subset in memory goes along pickled
+    methods = ["barycentric", "rbf", "hsh3", "lambert+ggx"]
+    here = [evaluate(fit, test, methods), evaluate(split, test, methods)]
+    with dask_client("local", workers=2, memory_limit=768 << 20, dashboard=False) as client:
+        there = [evaluate(fit, test, methods, client=client),
+                 evaluate(split, test, methods, client=client)]  # fmt: skip
+    for a, b in zip(here, there, strict=True):
+        assert [m.name for m in a.methods] == [m.name for m in b.methods] == methods
+        assert a.scale == b.scale
+        for m, n in zip(a.methods, b.methods, strict=True):
+            assert (m.mean, m.per_image, m.note) == (n.mean, n.per_image, n.note)
+    out = tmp_path / "scores.json"
+    argv = ["evaluate", str(fit.path), "--split", "every-other", "--methods", "nearest,ptm",
+            "--dask", "local", "--workers", "1", "--json", str(out), "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    assert "running on a local Dask cluster of 1 worker," in capsys.readouterr().err
+    assert set(json.loads(out.read_text())["methods"]) == {"nearest", "ptm"}
