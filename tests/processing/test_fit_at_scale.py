@@ -188,3 +188,36 @@ def test_an_unreachable_scheduler_is_a_clear_error(
 ) -> None:
     assert main(["fit", str(store), "--dask", "tcp://127.0.0.1:9", "--quiet"]) == 2
     assert "did not answer" in capsys.readouterr().err
+
+
+def test_rig_fit_on_a_running_scheduler_and_worker(
+    store: Path, whole_fit: SampleModels, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The --dask ADDRESS path against a real `dask scheduler` and `dask worker`."""
+    import json
+    import subprocess
+    import sys
+
+    dask = str(Path(sys.executable).with_name("dask"))
+    info = tmp_path / "scheduler.json"
+    scheduler = subprocess.Popen([dask, "scheduler", "--scheduler-file", str(info), "--port",
+                                  "0", "--dashboard-address", ":0"])  # fmt: skip
+    worker = None
+    try:
+        deadline = time.monotonic() + 60
+        while not info.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        address = json.loads(info.read_text())["address"]
+        worker = subprocess.Popen([dask, "worker", address, "--nworkers", "1", "--nthreads",
+                                   "1", "--memory-limit", "512MiB"])  # fmt: skip
+        target = tmp_path / "fit.npz"
+        argv = ["fit", str(store), "--dask", address, "--max-memory",
+                str(CHUNK * BYTES_PER_SAMPLE), "-o", str(target), "--quiet"]  # fmt: skip
+        assert main(argv) == 0
+        assert f"running on the Dask scheduler at {address}" in capsys.readouterr().err
+        _assert_same_fit(whole_fit, read_sample_models(target, ReflectanceField.open(store)))
+    finally:
+        for process in (worker, scheduler):
+            if process is not None:
+                process.terminate()
+                process.wait(timeout=30)
