@@ -117,7 +117,10 @@ def compute_each(
 
     The caller keeps each value as it comes and drops it, so the client never holds every
     task's result at once (a fit's blocks, a build's cameras). A progress bar counts the
-    finished tasks; a task's error is raised here, the others are cancelled.
+    finished tasks; a task's error is raised here, the others are cancelled. Make the tasks
+    with ``delayed(..., pure=False)`` (and scatter with ``hash=False``): keys of their own, so
+    a computation repeated right after another never meets keys the scheduler is still
+    releasing (it would cancel the task for "lost dependencies").
     """
     from distributed import as_completed
 

@@ -301,8 +301,8 @@ def _built_cameras(
 
     from core.cluster import compute_each
 
-    shared = client.scatter(cloud, broadcast=True)  # the points go to each worker once
-    tasks = [delayed(CameraJob.build, pure=True)(job, shared) for job in jobs]
+    shared = client.scatter(cloud, broadcast=True, hash=False)  # to each worker once
+    tasks = [delayed(CameraJob.build, pure=False)(job, shared) for job in jobs]
     for _, result in compute_each(client, tasks, progress=progress, what="process"):
         yield result
 

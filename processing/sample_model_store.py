@@ -135,6 +135,8 @@ def read_sample_models(
             fits[name] = BasisFit(name, data[f"{name}__coefficients"], loo)
         else:
             values = {key: data[f"{name}__{key}"] for key in _PARAMETRIC_ARRAYS}
+            # Fits saved before the marks were bytes hold them as float32 0/1.
+            values["lit"] = np.asarray(values["lit"]).astype(np.uint8, copy=False)
             fits[name] = ParametricFit(
                 name=name,
                 loo=loo,

@@ -120,7 +120,7 @@ def relight_batch(
             from core.cluster import compute_each
 
             tasks = [
-                delayed(relight_environment, pure=True)(plan, i, str(partial)) for i in indices
+                delayed(relight_environment, pure=False)(plan, i, str(partial)) for i in indices
             ]
             for _ in compute_each(client, tasks, progress=progress, what="environments"):
                 pass  # each task wrote its frames

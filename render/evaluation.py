@@ -456,8 +456,10 @@ def evaluate(
 
         # One task per method; each worker rebuilds the test images (the fields go along
         # pickled: a store by its path, a subset with its radiance).
-        fields = client.scatter([fit, test], broadcast=True)
-        tasks = [delayed(_score_on_worker, pure=True)(*fields, name, scale, mask)
+        # hash=False: a key of its own each time, never one still being released from a
+        # previous call with the same fields (Dask would then lose it mid-task)
+        fields = client.scatter([fit, test], broadcast=True, hash=False)
+        tasks = [delayed(_score_on_worker, pure=False)(*fields, name, scale, mask)
                  for name in methods]  # fmt: skip
         scored: dict[int, MethodResult] = dict(
             compute_each(client, tasks, progress=progress, what="evaluate")

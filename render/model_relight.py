@@ -277,7 +277,7 @@ def _shade_kernel(
     rho_d: NDArray[np.float32],
     f0: NDArray[np.float32],
     alpha: NDArray[np.float32],
-    lit: NDArray[np.float32],
+    lit: NDArray[np.uint8],
     points: NDArray[np.float64],
     eye: NDArray[np.float64],
     distant: bool,

@@ -320,7 +320,7 @@ class SampleTransfer:
 def _transfer(
     normals: NDArray[np.float64],
     source: NDArray[np.int64],
-    lit: NDArray[np.float32],
+    lit: NDArray[np.uint8],
     indices: NDArray[np.int64],
     weights: NDArray[np.float64],
     directions: NDArray[np.float64],
@@ -351,7 +351,7 @@ def _transfer(
 def sample_transfer(
     normals: NDArray[np.floating],
     source: NDArray[np.int64],
-    lit: NDArray[np.float32],
+    lit: NDArray[np.uint8],
     mark_directions: NDArray[np.floating],
     reaches: NDArray[np.floating] | None = None,
 ) -> SampleTransfer:
@@ -362,7 +362,7 @@ def sample_transfer(
     normals : ndarray, shape (P, 3), the fitted normals
     source : ndarray, shape (P,), int64, whose marks each sample uses
         (:func:`render.model_relight.fill_sources`)
-    lit : ndarray, shape (P, M), float32, the shadow marks at ``mark_directions``
+    lit : ndarray, shape (P, M), uint8, the shadow marks at ``mark_directions``
     mark_directions : ndarray, shape (M, 3), unit vectors (rig frame)
     reaches : ndarray, shape (3,), optional; light from w reaches the samples only where
         w . reaches > 0 (a pixel field's object plane, its camera's z axis)
@@ -384,7 +384,7 @@ def sample_transfer(
     visibility = np.zeros((p_count, basis.shape[1]), np.float32)
     _transfer(
         np.ascontiguousarray(normals, dtype=np.float64), np.ascontiguousarray(source),
-        np.ascontiguousarray(lit, dtype=np.float32), np.ascontiguousarray(marks.indices),
+        np.ascontiguousarray(lit), np.ascontiguousarray(marks.indices),
         np.ascontiguousarray(marks.weights), np.ascontiguousarray(directions), omega, basis,
         diffuse, visibility,
     )  # fmt: skip

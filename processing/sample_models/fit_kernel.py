@@ -410,7 +410,7 @@ def _fit_sample(
     out_x1: NDArray[np.float64],
     out_x2: NDArray[np.float64],
     out_alpha: NDArray[np.float64],
-    out_lit: NDArray[np.float32],
+    out_lit: NDArray[np.uint8],
     out_loo: NDArray[np.float64],
     out_energy: NDArray[np.float64],
     out_fitted: NDArray[np.bool_],
@@ -461,7 +461,7 @@ def _fit_sample(
     out_fitted[p] = usable
     if not usable:
         out_normal[p] = normal
-        out_lit[p, :] = 1.0
+        out_lit[p, :] = 1
         energy = 0.0
         for j in range(n_obs):
             for c in range(3):
@@ -523,7 +523,7 @@ def fit_samples(
     out_x1: NDArray[np.float64],
     out_x2: NDArray[np.float64],
     out_alpha: NDArray[np.float64],
-    out_lit: NDArray[np.float32],
+    out_lit: NDArray[np.uint8],
     out_loo: NDArray[np.float64],
     out_energy: NDArray[np.float64],
     out_fitted: NDArray[np.bool_],

@@ -48,7 +48,8 @@ class ParametricFit:
     rho_d : ndarray, shape (P, 3), float32, diffuse albedo per channel (f = rho_d / pi)
     f0 : ndarray, shape (P, 3), float32, specular reflectance (0 for ``lambert``)
     alpha : ndarray, shape (P,), float32, GGX roughness (1 for ``lambert``, unused)
-    lit : ndarray, shape (P, T), float32, 1 lit (or unknown), 0 shadowed, per measured light
+    lit : ndarray, shape (P, T), uint8, 1 lit (or unknown), 0 shadowed, per measured light
+        (marks are 0 or 1: a byte each, a quarter of float32's memory at millions of samples)
     fitted : ndarray, shape (P,), bool, samples with at least one usable observation
     loo : LooError
     normals_fitted : bool, the normals were fitted (photometric stereo, refinement)
@@ -59,7 +60,7 @@ class ParametricFit:
     rho_d: NDArray[np.float32]
     f0: NDArray[np.float32]
     alpha: NDArray[np.float32]
-    lit: NDArray[np.float32]
+    lit: NDArray[np.uint8]
     fitted: NDArray[np.bool_]
     loo: LooError
     normals_fitted: bool = False

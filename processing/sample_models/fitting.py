@@ -250,7 +250,7 @@ def _fit_parametric(
         from core.cluster import compute_each
 
         tasks = [
-            delayed(_fit_stored_block, pure=True)(
+            delayed(_fit_stored_block, pure=False)(
                 str(field.path), start, stop, job, *inputs(start, stop)
             )
             for start, stop in blocks
@@ -286,7 +286,7 @@ def _empty_outputs(count: int, t_count: int) -> Outputs:
         "x1": np.zeros((count, 3)),
         "x2": np.zeros((count, 3)),
         "alpha": np.ones(count),
-        "lit": np.ones((count, t_count), dtype=np.float32),
+        "lit": np.ones((count, t_count), dtype=np.uint8),
         "loo": np.zeros(count),
         "energy": np.zeros(count),
         "fitted": np.zeros(count, dtype=bool),

@@ -33,7 +33,7 @@ def geometric_shadow_marks(
     normals: NDArray[np.floating],
     directions: NDArray[np.floating],
     spacing: float | None = None,
-) -> NDArray[np.float32]:
+) -> NDArray[np.uint8]:
     """Shadow marks of every point for directional lights, from the point cloud's own geometry.
 
     One orthographic shadow map per direction: the points as disks one spacing wide in a
@@ -50,7 +50,7 @@ def geometric_shadow_marks(
 
     Returns
     -------
-    ndarray, shape (P, G), float32
+    ndarray, shape (P, G), uint8 (1 lit, 0 shadowed)
     """
     cloud = np.asarray(points, dtype=np.float64)
     normal = np.asarray(normals, dtype=np.float64)
@@ -64,7 +64,7 @@ def geometric_shadow_marks(
     gap = median_neighbour_distance(cloud, 20_000) if spacing is None else float(spacing)
     if not gap > 0:
         raise InputError(f"point spacing must be positive, got {gap}")
-    marks = np.ones((len(cloud), len(toward)), dtype=np.float32)
+    marks = np.ones((len(cloud), len(toward)), dtype=np.uint8)
     for g, direction in enumerate(toward / np.linalg.norm(toward, axis=1, keepdims=True)):
         helper = np.array([1.0, 0.0, 0.0]) if abs(direction[0]) < 0.9 else np.array([0, 1.0, 0])
         a = np.cross(direction, helper)
@@ -196,6 +196,6 @@ def shadow_mark_errors(
         return {"interpolated": 0.0, "geometry": 0.0, "compared": 0.0}
     return {
         "interpolated": float(np.abs(interpolated - measured)[facing].mean()),
-        "geometry": float(np.abs(geometry - measured)[facing].mean()),
+        "geometry": float(np.abs(geometry.astype(np.float32) - measured)[facing].mean()),
         "compared": float(compared),
     }
