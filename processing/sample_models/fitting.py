@@ -81,7 +81,7 @@ def fit_sample_models(
         :func:`core.memory_budget.default_memory_budget`): the field is read and fitted in
         blocks of samples (float32, every camera and light of each sample) of at most this
         size, aligned to the store's chunks. The peak is up to twice this (a block as stored
-        while it is widened and reordered) plus the outputs (the fits: about 100 + 4 T bytes
+        while it is widened and reordered) plus the outputs (the fits: about 100 + T bytes
         a sample per model), whatever the field's size.
     client : distributed.Client, optional
         Fit the blocks as Dask tasks on this client's cluster (:func:`core.cluster.dask_client`;
