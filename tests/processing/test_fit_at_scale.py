@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import os
 import shutil
-import signal
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -22,6 +19,7 @@ from core.field_store import ReflectanceField
 from processing.sample_model_store import read_sample_models
 from processing.sample_models import SampleModels, fit_sample_models, sample_block_size
 from sim.field import field_cameras, simulate_field
+from tests.cluster_faults import kill_a_worker_mid_run
 
 CHUNK = 700  # samples per stored chunk: 3000 samples are 4 full chunks and a short one
 BYTES_PER_SAMPLE = 6 * 16 * 3 * 4  # float32 radiance of one sample, 6 cameras x 16 lights
@@ -150,31 +148,11 @@ def test_a_local_cluster_gives_the_same_fit(
 def test_a_worker_killed_mid_fit_is_replaced_and_the_fit_is_the_same(
     store: Path, whole_fit: SampleModels, client: Any
 ) -> None:
-    before = client.run(os.getpid)
     field = ReflectanceField.open(store)
-    result: dict[str, Any] = {}
-
-    def fit() -> None:
-        try:
-            result["fit"] = fit_sample_models(field, memory_bytes=100 * BYTES_PER_SAMPLE,
-                                              client=client)  # fmt: skip
-        except Exception as error:  # handed to the test's thread
-            result["error"] = error
-
-    worker = threading.Thread(target=fit)
-    worker.start()
-    deadline = time.monotonic() + 60
-    busy: list[str] = []
-    while not busy and time.monotonic() < deadline:
-        busy = [address for address, tasks in client.processing().items() if tasks]
-        time.sleep(0.005)
-    assert busy, "no task started within a minute"
-    os.kill(before[busy[0]], signal.SIGKILL)  # a worker lost mid-task, as a crashed machine
-    worker.join(timeout=300)
-    assert not worker.is_alive() and "error" not in result, result.get("error")
-    _assert_same_fit(whole_fit, result["fit"])
-    client.wait_for_workers(2, timeout=60)
-    assert set(client.run(os.getpid).values()) != set(before.values())  # one was replaced
+    fitted = kill_a_worker_mid_run(
+        client, lambda: fit_sample_models(field, memory_bytes=100 * BYTES_PER_SAMPLE, client=client)
+    )
+    _assert_same_fit(whole_fit, fitted)
 
 
 def test_a_subset_in_memory_cannot_go_to_the_cluster(store: Path, client: Any) -> None:

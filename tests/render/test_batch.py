@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import os
-import signal
-import threading
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -22,6 +19,7 @@ from core.sample_data import panorama_path
 from render.batch import BatchPlan, read_batch_frames, relight_batch
 from render.relighter import RelightSettings
 from sim.field import field_cameras, simulate_field
+from tests.cluster_faults import kill_a_worker_mid_run
 
 
 @pytest.fixture(scope="module")
@@ -79,32 +77,17 @@ def test_a_local_cluster_writes_the_same_frames(
 def test_a_worker_killed_mid_batch_leaves_a_complete_store(
     store: Path, in_process: NDArrayU8, client: Any, tmp_path: Path
 ) -> None:
-    before = client.run(os.getpid)
     target = tmp_path / "frames.zarr"
-    result: dict[str, Any] = {}
 
-    def run() -> None:
-        try:
-            result["store"] = relight_batch(_plan(store, 4), target, client=client)
-        except Exception as error:  # handed to the test's thread
-            result["error"] = error
+    def nothing_under_the_real_name() -> None:
+        assert not target.exists()
 
-    worker = threading.Thread(target=run)
-    worker.start()
-    deadline = time.monotonic() + 60
-    busy: list[str] = []
-    while not busy and time.monotonic() < deadline:
-        busy = [address for address, tasks in client.processing().items() if tasks]
-        time.sleep(0.005)
-    assert busy, "no task started within a minute"
-    assert not target.exists()  # nothing under the real name while tasks run
-    os.kill(before[busy[0]], signal.SIGKILL)
-    worker.join(timeout=300)
-    assert not worker.is_alive() and "error" not in result, result.get("error")
-    np.testing.assert_array_equal(np.asarray(zarr.open_array(str(target / "frames"))[:]),
-                                  in_process)  # fmt: skip
-    client.wait_for_workers(2, timeout=60)
-    assert set(client.run(os.getpid).values()) != set(before.values())
+    kill_a_worker_mid_run(
+        client, lambda: relight_batch(_plan(store, 4), target, client=client),
+        nothing_under_the_real_name,
+    )  # fmt: skip
+    frames = np.asarray(zarr.open_array(str(target / "frames"))[:])
+    np.testing.assert_array_equal(frames, in_process)
 
 
 def test_a_failed_task_leaves_no_store(store: Path, tmp_path: Path) -> None:
