@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import time
 from collections.abc import Iterator, Sequence
 from typing import Any
 
@@ -135,9 +136,35 @@ def compute_each(
             future.release()
     except BaseException:
         client.cancel(futures)
+        # A cancelled task that already runs goes on to its end (Dask cannot interrupt it):
+        # wait for it, so the caller's clean-up (removing a partial store) comes after its
+        # last write, not before.
+        _wait_for_running(client, {future.key for future in futures})
         raise
     finally:
         bar.close()
+
+
+#: Seconds to wait, after a failure, for cancelled tasks still running to end.
+SETTLE_TIMEOUT_S = 600.0
+
+
+def _running_keys(dask_worker: Any) -> list[Any]:
+    """The keys of the tasks a worker is running (called on each worker by ``client.run``)."""
+    # all_running_tasks: executing ones, cancelled ones included (they hold a thread).
+    return [task.key for task in dask_worker.state.all_running_tasks]
+
+
+def _wait_for_running(client: Any, keys: set[Any]) -> None:
+    deadline = time.monotonic() + SETTLE_TIMEOUT_S
+    while time.monotonic() < deadline:
+        try:
+            running = client.run(_running_keys)
+        except Exception:  # a worker lost, the cluster closing: nothing more to wait for
+            return
+        if not keys.intersection(key for found in running.values() for key in found):
+            return
+        time.sleep(0.1)
 
 
 def worker_memory(client: Any) -> int | None:
