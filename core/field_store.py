@@ -207,7 +207,9 @@ class FieldStoreWriter:
             The slab holds NaN or infinity (or overflows the store's dtype): named by count
             and first sample; nothing is stored.
         """
-        self.record_slab(camera, light, *self.slab_writer().write(camera, light, radiance))
+        self.record_slab(
+            camera, light, *_store_slab(self.radiance, self.path, camera, light, radiance)
+        )
 
     def slab_writer(self) -> SlabWriter:
         """A writer of slabs into this store while it is built, for this or another process.
@@ -297,23 +299,33 @@ class SlabWriter:
 
         Raises DatasetError for NaN or infinity (or an overflow of the store's dtype).
         """
-        array = self._radiance("r+")
-        with np.errstate(over="ignore"):  # an overflow becomes infinity, refused below
-            values = np.ascontiguousarray(radiance, dtype=array.dtype)
-        found = non_finite(values)
-        if found is not None:
-            raise DatasetError(
-                f"{self.path}: camera {camera} light {light}: {found[0]} radiance values are "
-                f"NaN or infinite in {array.dtype} (the first at sample {found[1][0]}); "
-                "the store keeps finite light only: check the images and calibration"
-            )
-        array[camera, light] = values
-        return slab_digest(values), float(values.max()) if values.size else 0.0
+        return _store_slab(self._radiance("r+"), self.path, camera, light, radiance)
 
     def read(self, camera: int, light: int) -> NDArray[np.float32]:
         """A slab (P, 3) written before, as float32."""
         array = self._radiance("r")
         return np.asarray(read_checked(self.partial, array, (camera, light)), dtype=np.float32)
+
+
+def _store_slab(
+    array: Any, where: Path, camera: int, light: int, radiance: NDArray[np.floating]
+) -> tuple[bytes, float]:
+    """Write one slab (P, 3) into the radiance ``array``; its digest and largest value.
+
+    Raises DatasetError for NaN or infinity (or an overflow of the store's dtype), naming the
+    store ``where``; nothing is written then.
+    """
+    with np.errstate(over="ignore"):  # an overflow becomes infinity, refused below
+        values = np.ascontiguousarray(radiance, dtype=array.dtype)
+    found = non_finite(values)
+    if found is not None:
+        raise DatasetError(
+            f"{where}: camera {camera} light {light}: {found[0]} radiance values are "
+            f"NaN or infinite in {array.dtype} (the first at sample {found[1][0]}); "
+            "the store keeps finite light only: check the images and calibration"
+        )
+    array[camera, light] = values
+    return slab_digest(values), float(values.max()) if values.size else 0.0
 
 
 def _check_target(path: Path, overwrite: bool) -> None:

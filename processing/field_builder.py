@@ -251,14 +251,17 @@ def build_field(
     )
     options = {"demosaic": demosaic, "transfer": transfer}
     s_count, t_count, p_count = len(layout.cameras), len(layout.light_indices), len(cloud.points)
-    jobs = []
-    for s, pinhole in enumerate(layout.cameras):
-        brackets = {t: [(data.image_path(r), r.exposure_ms) for r in records]
-                    for (c, t), records in layout.brackets.items() if c == s}  # fmt: skip
-        darks = {key: data.image_path(r) for (c, key), r in layout.darks.items() if c == s}
-        scales = (radiance_scale * layout.intensities).astype(np.float32)
-        jobs.append(CameraJob(s, pinhole, brackets, darks, layout.light_directions, scales,
-                              options, store.slab_writer()))  # fmt: skip
+    # Each camera's images, by path: what a task needs of the dataset.
+    brackets: list[dict[int, list[tuple[Path, float]]]] = [{} for _ in layout.cameras]
+    darks: list[dict[float, Path]] = [{} for _ in layout.cameras]
+    for (c, t), records in layout.brackets.items():
+        brackets[c][t] = [(data.image_path(r), r.exposure_ms) for r in records]
+    for (c, exposure_ms), record in layout.darks.items():
+        darks[c][exposure_ms] = data.image_path(record)
+    scales = (radiance_scale * layout.intensities).astype(np.float32)
+    writer = store.slab_writer()
+    jobs = [CameraJob(s, pinhole, brackets[s], darks[s], layout.light_directions, scales,
+                      options, writer) for s, pinhole in enumerate(layout.cameras)]  # fmt: skip
     counts = {"exposures": 0, "darks": 0, "without_dark": 0, "visible": 0, "saturated": 0}
     try:
         for result in _built_cameras(jobs, cloud, client, progress):
