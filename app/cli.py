@@ -30,7 +30,12 @@ from app.cli_batch import add_batch
 from app.cli_bench import add_bench_parser
 from app.cli_calibrate import add_calibrate
 from app.cli_capture import add_capture
-from app.cli_evaluate import add_evaluate, add_transfer_option, relight_lights
+from app.cli_evaluate import (
+    add_below_horizon_option,
+    add_evaluate,
+    add_transfer_option,
+    relight_lights,
+)
 from app.cli_export import add_export_web
 from app.cli_fit import add_fit
 from app.cli_plan import add_plan
@@ -123,13 +128,18 @@ def _add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--env", type=Path, help="panorama file (or --lights)")
     p.add_argument("--lights", type=Path, help="an .lp file: one image per line, relit under "
                    "that directional light (camera frame), written into -o DIR")  # fmt: skip
-    p.add_argument("--method", choices=("auto", *PREDICTORS), default="auto",
-                   help="--lights: the method (default: the best on a held-out split of the "
-                   "field's lights)")  # fmt: skip
+    p.add_argument("--method", choices=("auto", "light-stage", *PREDICTORS), default="auto",
+                   help="the method that predicts unmeasured lights (default auto: the best on "
+                   "held-out lights of the field, chosen among every rung; --env on an RTI "
+                   "capture: under this panorama, light-stage being the classic sum of the "
+                   "images weighted by the light of their cells)")  # fmt: skip
+    p.add_argument("--fast", action="store_true", help="auto: choose among the quick rungs "
+                   "only (no network to train)")  # fmt: skip
     p.add_argument("--camera", type=whole, help="--lights on a field of points: the captured "
                    "camera whose view is relit")  # fmt: skip
     p.add_argument("--exr", action="store_true", help="--lights: also write linear OpenEXR")
     add_transfer_option(p)
+    add_below_horizon_option(p)
     p.add_argument("--scheme", choices=(*SCHEMES, "model"), help="how the panorama lights the "
                    "field; model: through per-sample models fitted to it (default: the most "
                    "accurate, chosen by held-out lights)")  # fmt: skip
@@ -195,7 +205,9 @@ def _run_relight(args: argparse.Namespace) -> int:
     if panorama.note:
         print(panorama.note)
     modulation = None if args.modulation is None else read_modulation_map(args.modulation)
-    with open_field_or_rti(args.field, progress=True, transfer=args.transfer) as field:
+    with open_field_or_rti(
+        args.field, progress=True, transfer=args.transfer, below_horizon=args.below_horizon
+    ) as field:
         return _relight_field(args, field, panorama, modulation, suffix)
 
 
@@ -204,7 +216,7 @@ def _relight_field(
 ) -> int:
     from core.camera_model import PinholeCamera
     from core.splat import require_outside
-    from processing.environment import adjust_environment
+    from processing.panorama import adjust_panorama, visible_environment
     from render.output import IMAGE_SUFFIXES, write_image, write_sequence
     from render.relight_mode import open_relighter
     from render.sequence import relight_sequence
@@ -228,11 +240,12 @@ def _relight_field(
     if suffix not in IMAGE_SUFFIXES:
         if args.sequence == "turntable" and field.sample_kind == "pixels":
             raise RigError(f"{args.field} holds one fixed view: use --sequence environment")
-    mode, models, comparison = _relight_mode(args, field)
-    controls = mode.lighting_controls(
-        yaw_deg=args.yaw, exposure=args.exposure, modulation=modulation
+    # The panorama as the object sees it, for the choice and the guards (the engines apply the
+    # same yaw, exposure and horizon themselves).
+    relit = visible_environment(
+        adjust_panorama(panorama, yaw_deg=args.yaw, exposure=args.exposure), field.below_horizon
     )
-    relit = adjust_environment(panorama, controls)
+    mode, models, comparison = _relight_mode(args, field, relit)
     for warning in _relight_warnings(field, camera, relit, mode, models, comparison):
         print(warning)
     relighter = open_relighter(field, mode, models)
@@ -276,11 +289,11 @@ def _relight_warnings(
     return relight_warnings(field, camera, relit.rgb, mode, models, comparison)
 
 
-def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any, Any]:
+def _relight_mode(args: argparse.Namespace, field: Any, relit: Any) -> tuple[Any, Any, Any]:
     """The relighting mode the flags ask for, and what informs it.
 
     Returns the mode, the field's models when it needs them, and the held-out comparison
-    when the mode was chosen by it (else None).
+    when the mode was chosen by it (else None). ``relit``: the panorama as the object sees it.
     """
     from dataclasses import replace
 
@@ -299,6 +312,8 @@ def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any, Any]:
         )
         return mode, models_for_field(field, args.models, progress=True), None
     flags = (args.scheme, args.interp, args.view_interp, args.k, args.m, args.n)
+    if args.method != "auto" or (field.sample_kind == "pixels" and all(f is None for f in flags)):
+        return _pixel_field_mode(args, field, relit), None, None
     if all(flag is None for flag in flags):
         choice = most_accurate_mode(field, models_path=args.models, progress=True)
         print(f"relighting mode: {choice.reason}")
@@ -313,6 +328,29 @@ def _relight_mode(args: argparse.Namespace, field: Any) -> tuple[Any, Any, Any]:
     if args.view_interp:
         settings = replace(settings, view_interpolation=args.view_interp)
     return settings, None, None
+
+
+def _pixel_field_mode(args: argparse.Namespace, field: Any, relit: Any) -> Any:
+    """``--method`` (or its automatic choice under the panorama) on a field of pixels."""
+    from render.environment_choice import choose_environment_mode, environment_mode
+
+    if field.sample_kind != "pixels":
+        raise InputError(
+            f"--method relights a field of pixels (an RTI capture); {args.field} is a field of "
+            "points: use --scheme (model, or an interpolation scheme)"
+        )
+    flags = ("--scheme", "--interp", "--view-interp", "-k", "-m", "-n")
+    given = [f for f, v in zip(flags, (args.scheme, args.interp, args.view_interp, args.k,
+                                       args.m, args.n), strict=True) if v is not None]  # fmt: skip
+    if given:
+        raise InputError(f"--method {args.method} chooses the relighting; drop {', '.join(given)}")
+    if args.method != "auto":
+        return environment_mode(args.method, progress=True)
+    choice = choose_environment_mode(field, relit, fast=args.fast, progress=True)
+    for score in choice.scores:
+        print(f"  {score.name:<22} {score.error:7.2%}  ({score.seconds:.1f} s)")
+    print(f"relighting mode: {choice.reason}")
+    return choice.mode
 
 
 def _write_pyvista_picture(args: argparse.Namespace, field: Any, camera: Any, image: Any) -> None:

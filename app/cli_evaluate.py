@@ -14,7 +14,7 @@ from typing import Any
 from app.cli_args import add_dask_options, cluster_for, names_among, output_file, require_output
 from core.errors import InputError
 
-__all__ = ["add_evaluate", "add_transfer_option", "relight_lights"]
+__all__ = ["add_below_horizon_option", "add_evaluate", "add_transfer_option", "relight_lights"]
 
 
 def add_transfer_option(p: argparse.ArgumentParser) -> None:
@@ -26,6 +26,18 @@ def add_transfer_option(p: argparse.ArgumentParser) -> None:
         help="RTI captures: decode the images as sRGB or as linear values (default auto: 8-bit "
         "sRGB, 16-bit and float linear); a mask (FILE.mask.png or mask.png) and intensities "
         "(a fifth .lp column or FILE.intensities) beside the .lp are used (docs/processing.md)",
+    )
+
+
+def add_below_horizon_option(p: argparse.ArgumentParser) -> None:
+    """``--below-horizon``: whether the environment below the object's base reaches it."""
+    p.add_argument(
+        "--below-horizon",
+        choices=("blocked", "open"),
+        help="what lies below the horizon of the object's base: blocked (a table, base or "
+        "turntable hides that part of the environment: its light is dropped) or open (the "
+        "object is lit from below too). Default: what the field states; an RTI capture is "
+        "imported as blocked, simulated fields float (open)",
     )
 
 
@@ -133,8 +145,55 @@ def _lp_names(path: Path) -> list[str]:
     return list(read_lp(path).files)
 
 
-#: Methods ``rig relight --lights`` chooses among by a held-out split of the field's lights.
-AUTO_CANDIDATES = ("barycentric", "rbf", "lambert+ggx+residual", "adaptive")
+#: Methods ``rig relight --lights`` chooses among by held-out splits of the field's lights:
+#: the interpolations, the RTI tools' fits (PTM and HSH on 8-bit values and in linear light),
+#: the models with their residual; then, unless ``--fast``, the learned rung.
+AUTO_CANDIDATES = (
+    "barycentric",
+    "rbf",
+    "ptm-8bit",
+    "hsh3-8bit",
+    "hsh3",
+    "lambert+ggx+residual",
+    "adaptive",
+)
+SLOW_CANDIDATES = ("learned+residual",)
+
+
+def choose_light_method(field: Any, queries: Any, *, fast: bool) -> str:
+    """The method of the best held-out PSNR on splits of ``field``'s lights like the use.
+
+    Every other light is held out (gaps as wide as the ones to fill); when a query lies outside
+    the measured lights (below the lowest ring) the lowest lights are held out too, so the choice
+    tests extrapolation where the use extrapolates. Scores are the mean PSNR over the splits.
+    """
+    import numpy as np
+
+    from processing.measured_region import MeasuredRegion
+    from render.evaluation import evaluate, lowest_lights, split_lights
+
+    splits = [("every other light", *split_lights(field, "every-other"))]
+    lowest = lowest_lights(field)
+    outside = MeasuredRegion.build(field.light_directions).outside(queries)
+    if outside.any() and len(lowest) <= field.shape[1] - 3:
+        rest = np.setdiff1d(np.arange(field.shape[1]), lowest)
+        splits.append(("the lowest lights", rest, lowest))
+    candidates = AUTO_CANDIDATES if fast else AUTO_CANDIDATES + SLOW_CANDIDATES
+    psnr: dict[str, list[float]] = {name: [] for name in candidates}
+    seconds = dict.fromkeys(candidates, 0.0)
+    for _, fit_index, test_index in splits:
+        trial = evaluate(field.subset(lights=fit_index), field.subset(lights=test_index),
+                         candidates, progress=True)  # fmt: skip
+        for result in trial.methods:
+            psnr[result.name].append(result.mean.psnr if result.mean is not None else -np.inf)
+            seconds[result.name] += result.seconds
+    ranked = sorted(candidates, key=lambda name: -float(np.mean(psnr[name])))
+    for name in ranked:
+        print(f"  {name:<22} {np.mean(psnr[name]):6.2f} dB  ({seconds[name]:.1f} s)")
+    how = " and ".join(name for name, _, _ in splits)
+    print(f"method: {ranked[0]} (best held-out PSNR, {how}; chosen in "
+          f"{sum(seconds.values()):.0f} s among {len(candidates)})")  # fmt: skip
+    return ranked[0]
 
 
 def relight_lights(args: argparse.Namespace, field: Any) -> int:
@@ -151,7 +210,6 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
     from core.image_io import write_exr, write_srgb8
     from processing.image_quality import display_8bit, display_scale
     from processing.rti_lp import read_lp
-    from render.evaluation import evaluate, split_lights
     from render.light_prediction import make_predictor
 
     directory = require_output(args.output, directory=True)
@@ -165,16 +223,12 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
         camera = args.camera
         if not 0 <= camera < field.shape[0]:
             raise InputError(f"--camera {camera}: {args.field} has cameras 0..{field.shape[0] - 1}")
-    method = args.method
-    if method == "auto":
-        fit_index, test_index = split_lights(field, "every-other")
-        trial = evaluate(
-            field.subset(lights=fit_index), field.subset(lights=test_index), AUTO_CANDIDATES
-        )
-        method = trial.best().name
-        print(f"method: {method} (best held-out PSNR on every other light of the field)")
-    predictor = make_predictor(field, method, progress=True)
     directions = camera_to_rig(lights.directions, field.cameras[camera])
+    # The light-stage sum's image under one light is the nearest measured image.
+    method = "nearest" if args.method == "light-stage" else args.method
+    if method == "auto":
+        method = choose_light_method(field, directions, fast=args.fast)
+    predictor = make_predictor(field, method, progress=True)
     predicted = predictor.predict(camera, directions)
     scale = (
         1.0

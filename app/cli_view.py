@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from app.cli_args import image_size, whole
-from app.cli_evaluate import add_transfer_option
+from app.cli_evaluate import add_below_horizon_option, add_transfer_option
 
 __all__ = ["add_view", "open_session"]
 
@@ -42,6 +42,7 @@ def add_view(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                    "127.0.0.1: this machine only; the viewer has no login)")  # fmt: skip
     p.add_argument("--port", type=_port, default=0, help="port (default: a free one)")
     add_transfer_option(p)
+    add_below_horizon_option(p)
     p.set_defaults(handler=_run_view)
 
 
@@ -78,7 +79,9 @@ def _run_view(args: argparse.Namespace) -> int:
     from app.live_server import start_viewer
     from processing.rti import open_field_or_rti
 
-    with open_field_or_rti(args.field, progress=True, transfer=args.transfer) as field:
+    with open_field_or_rti(
+        args.field, progress=True, transfer=args.transfer, below_horizon=args.below_horizon
+    ) as field:
         session = open_session(field, args.env, size=args.size, models=args.models)
         server = start_viewer(session, host=args.host, port=args.port)
         print(f"rig view: open {server.url} in a browser (Ctrl-C stops)", flush=True)

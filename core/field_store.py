@@ -23,7 +23,9 @@ Attributes: ``schema_version``, ``samples`` (``{"kind": "points"}``: 3D surface 
 views by splatting; or ``{"kind": "pixels", "height": h, "width": w}``: the pixels of one fixed
 view in row-major order, P = h w, as RTI data), ``cameras`` (one dict per camera: azimuth_deg,
 inclination_deg, distance, fov_deg, width, height), ``light_model`` ("directional" or "point"
-with its distance), ``provenance`` (free-form dict: scene, tool, creation time...).
+with its distance; ``below_horizon``: what the capture states of the environment below the
+rig's horizon, see :data:`BELOW_HORIZON`), ``provenance`` (free-form dict: scene, tool,
+creation time...).
 """
 
 from __future__ import annotations
@@ -31,9 +33,9 @@ from __future__ import annotations
 import os
 import shutil
 from collections import OrderedDict
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 import zarr
@@ -51,15 +53,25 @@ from core.field_integrity import (
 )
 
 __all__ = [
+    "BELOW_HORIZON",
     "CACHED_SLABS",
     "FIELD_SCHEMA_VERSION",
     "SAMPLE_CHUNK",
+    "BelowHorizon",
     "FieldStoreWriter",
     "ReflectanceField",
     "SlabWriter",
     "companion_paths",
     "is_field_store",
 ]
+
+BelowHorizon = Literal["blocked", "open"]
+#: What lies below the rig's horizon (the plane of the object's base, rig z = 0), as a capture
+#: states it in ``light_model["below_horizon"]``. ``blocked``: a base, table or turntable hides
+#: the environment below the horizon from the object (the usual case: captures default to it),
+#: so relighting drops that light; ``open``: the object is lit from every direction (a floating
+#: object, the simulator's scenes). Stores that state nothing were relit as ``open``.
+BELOW_HORIZON: tuple[BelowHorizon, ...] = get_args(BelowHorizon)
 
 FIELD_SCHEMA_VERSION = 1
 
@@ -474,6 +486,26 @@ class ReflectanceField:
         state = dict(self.__dict__)
         state["_slabs"] = OrderedDict()
         return state
+
+    @property
+    def below_horizon(self) -> BelowHorizon:
+        """What the capture states lies below the horizon (:data:`BELOW_HORIZON`)."""
+        value = self.light_model.get("below_horizon", "open")
+        if value not in BELOW_HORIZON:
+            raise DatasetError(
+                f"{self.path}: light_model below_horizon is {value!r}; the store must state "
+                f"one of {', '.join(BELOW_HORIZON)}"
+            )
+        return value
+
+    def stating(self, *, below_horizon: BelowHorizon) -> ReflectanceField:
+        """The same field (same store, same data) with another statement of what lies below."""
+        if below_horizon not in BELOW_HORIZON:
+            raise InputError(
+                f"below the horizon must be one of {', '.join(BELOW_HORIZON)}, got "
+                f"{below_horizon!r}"
+            )
+        return replace(self, light_model=self.light_model | {"below_horizon": below_horizon})
 
     @property
     def shape(self) -> tuple[int, int, int]:

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from core.directions import panorama_solid_angles, rotate_panorama_yaw
 from core.errors import InputError, PanoramaError
+from core.field_store import BelowHorizon
 from core.image_io import ImageFileError, Transfer, read_linear
 
 __all__ = [
@@ -27,10 +28,13 @@ __all__ = [
     "NEGATIVE_TOLERANCE",
     "PANORAMA_SUFFIXES",
     "Panorama",
+    "VisibleEnvironments",
     "adjust_panorama",
+    "block_below_horizon",
     "downsample_panorama",
     "panorama_from_array",
     "read_panorama",
+    "visible_environment",
 ]
 
 PANORAMA_SUFFIXES = (".exr", ".hdr", ".pic", ".png", ".jpg", ".jpeg")
@@ -254,3 +258,46 @@ def downsample_panorama(rgb: NDArray[np.floating], height: int) -> NDArray[np.fl
     energy = (image * omega[:, :, None]).reshape(*shape, 3).sum(axis=(1, 3))
     area = omega.reshape(shape).sum(axis=(1, 3))
     return (energy / area[:, :, None]).astype(np.float32)
+
+
+def visible_environment(panorama: Panorama, below_horizon: BelowHorizon) -> Panorama:
+    """The panorama as the captured object sees it: :func:`block_below_horizon` when blocked."""
+    return block_below_horizon(panorama) if below_horizon == "blocked" else panorama
+
+
+class VisibleEnvironments:
+    """:func:`visible_environment` of the last panorama, kept while the same one lights.
+
+    An engine relights many frames under one panorama (the viewer's drags, a sequence); the
+    blocked copy is made once per panorama (by identity), so the caches keyed on the panorama
+    downstream (a pre-filter) keep working.
+    """
+
+    def __init__(self, below_horizon: BelowHorizon) -> None:
+        self.below_horizon = below_horizon
+        self._last: tuple[Panorama, Panorama] | None = None
+
+    def __call__(self, panorama: Panorama) -> Panorama:
+        """The panorama as seen (see :func:`visible_environment`)."""
+        if self._last is None or self._last[0] is not panorama:
+            self._last = (panorama, visible_environment(panorama, self.below_horizon))
+        return self._last[1]
+
+
+def block_below_horizon(panorama: Panorama) -> Panorama:
+    """The panorama with the light from below the horizon (rig ``z < 0``) removed.
+
+    What a base, table or turntable under the object does to the environment (a capture that
+    states ``below_horizon = "blocked"``, :data:`core.field_store.BELOW_HORIZON`). Rows wholly
+    below the horizon become black; a row the horizon crosses (odd heights) keeps the share of
+    its solid angle above it.
+    """
+    height = panorama.rgb.shape[0]
+    top = np.pi * np.arange(height) / height
+    bottom = np.pi * np.arange(1, height + 1) / height
+    above = np.cos(top) - np.cos(np.minimum(bottom, np.pi / 2))
+    share = np.clip(above / (np.cos(top) - np.cos(bottom)), 0.0, 1.0).astype(np.float32)
+    if share.min() >= 1.0:
+        return panorama
+    rgb = panorama.rgb * share[:, None, None]
+    return replace(panorama, rgb=np.ascontiguousarray(rgb, dtype=np.float32))

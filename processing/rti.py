@@ -36,7 +36,7 @@ from tqdm import tqdm
 
 from core.camera_model import PinholeCamera, camera_to_rig, rig_to_camera
 from core.errors import DatasetError, InputError
-from core.field_store import FieldStoreWriter, ReflectanceField
+from core.field_store import BELOW_HORIZON, BelowHorizon, FieldStoreWriter, ReflectanceField
 from core.image_io import (
     ImageFileError,
     PixelDepth,
@@ -214,6 +214,7 @@ def import_rti(
     overwrite: bool = True,
     transfer: TransferChoice = "auto",
     mask: str | os.PathLike[str] | None = None,
+    below_horizon: BelowHorizon = "blocked",
 ) -> ReflectanceField:
     """Import an RTI capture (an ``.lp`` file and its images) as a single-view pixel field.
 
@@ -234,6 +235,10 @@ def import_rti(
         Non-zero pixels are the object: the others are not samples (visibility False). None
         looks for a sidecar beside the ``.lp`` file (:data:`MASK_SIDECARS`: ``<stem>.mask.png``,
         then ``mask.png``); without one, every pixel counts.
+    below_horizon : {"blocked", "open"}
+        What lies below the horizon of the object's base (:data:`core.field_store.BELOW_HORIZON`):
+        an RTI object lies on a table or stands on a base, so the default is ``"blocked"`` and
+        environment relighting drops the light from below.
 
     Returns
     -------
@@ -272,6 +277,10 @@ def import_rti(
         raise InputError(f"field dtype must be float16 or float32, got {dtype!r}")
     if transfer not in ("auto", "srgb", "linear"):
         raise InputError(f"transfer must be 'auto', 'srgb' or 'linear', got {transfer!r}")
+    if below_horizon not in BELOW_HORIZON:
+        raise InputError(
+            f"below the horizon must be one of {', '.join(BELOW_HORIZON)}, got {below_horizon!r}"
+        )
     lights = read_lp(lp_file)
     folder = lp_file.parent
     paths = [_image_path(folder, name) for name in lights.files]
@@ -302,6 +311,9 @@ def import_rti(
             else f"intensities: {intensity_record['source']} "
             f"({min(intensity_record['values']):g} to {max(intensity_record['values']):g}), "
             "each image divided by its own",
+            "below the horizon: blocked by the base (environment light from below is dropped)"
+            if below_horizon == "blocked"
+            else "below the horizon: open (the object is lit from below too)",
         ]
     )
     if progress:
@@ -319,6 +331,7 @@ def import_rti(
         light_model={
             "type": "directional",
             "irradiance": 1.0,
+            "below_horizon": below_horizon,
             "note": "RTI: intensities not calibrated"
             if intensities is None
             else "RTI: each image divided by its light's relative intensity (not calibrated)",
@@ -521,6 +534,7 @@ def open_field_or_rti(
     progress: bool = False,
     transfer: TransferChoice = "auto",
     mask: str | os.PathLike[str] | None = None,
+    below_horizon: BelowHorizon | None = None,
 ) -> Iterator[ReflectanceField]:
     """Open a field store, or an RTI capture imported into a temporary store for the ``with``.
 
@@ -530,6 +544,10 @@ def open_field_or_rti(
     progress : bool, a progress bar while importing (and the import's ``assumed`` line)
     transfer, mask : passed to :func:`import_rti` (a store is opened as it is: giving either
         for one is refused)
+    below_horizon : {"blocked", "open"} or None
+        What lies below the horizon (:data:`core.field_store.BELOW_HORIZON`): for a capture,
+        passed to :func:`import_rti` (None: its default, ``"blocked"``); for a store, it
+        replaces the store's statement for this opening (None: the store's own)
 
     Raises
     ------
@@ -552,9 +570,11 @@ def open_field_or_rti(
                 f"{where}: a transfer or a mask applies to an RTI capture (.lp) as it is "
                 "imported; a field store keeps the ones it was made with"
             )
-        yield ReflectanceField.open(where)
+        opened = ReflectanceField.open(where)
+        yield opened if below_horizon is None else opened.stating(below_horizon=below_horizon)
         return
     with tempfile.TemporaryDirectory(prefix="rig-rti-") as scratch:
         yield import_rti(
-            lp, Path(scratch) / "field.zarr", progress=progress, transfer=transfer, mask=mask
-        )
+            lp, Path(scratch) / "field.zarr", progress=progress, transfer=transfer, mask=mask,
+            below_horizon=below_horizon or "blocked",
+        )  # fmt: skip

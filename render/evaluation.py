@@ -59,6 +59,7 @@ __all__ = [
     "MethodResult",
     "evaluate",
     "held_out_errors",
+    "lowest_lights",
     "ring_groups",
     "split_lights",
     "test_field_from_lp",
@@ -80,6 +81,24 @@ def ring_groups(field: ReflectanceField) -> NDArray[np.int64]:
     ring = np.zeros(len(order), dtype=np.int64)
     ring[order] = np.concatenate([[0], np.cumsum(np.diff(inclination[order]) > RING_GAP_DEG)])
     return ring
+
+
+def lowest_lights(field: ReflectanceField) -> NDArray[np.int64]:
+    """The lowest sixth of the lights (at least 3), completed to whole rings: (L,) indices.
+
+    What a use below the measured lights extrapolates from is the lowest lights' neighbours:
+    holding these out tests it. Inclinations are in the camera frame for pixel fields; a
+    light within :data:`RING_GAP_DEG` of the highest one taken belongs to its ring and is
+    taken too.
+    """
+    directions = field.light_directions
+    if field.sample_kind == "pixels":
+        directions = rig_to_camera(directions, field.cameras[0])
+    inclination = np.degrees(np.arccos(np.clip(directions[:, 2], -1.0, 1.0)))
+    order = np.argsort(-inclination)
+    count = max(3, len(order) // 6)
+    edge = inclination[order[count - 1]]
+    return np.sort(np.flatnonzero(inclination > edge - RING_GAP_DEG)).astype(np.int64)
 
 
 def split_lights(field: ReflectanceField, how: str) -> tuple[NDArray[np.int64], NDArray[np.int64]]:

@@ -92,6 +92,7 @@ __all__ = [
     "bound_factor",
     "choose_rbf_sigma",
     "eight_bit_levels",
+    "environment_radiance",
     "fit_basis_8bit",
     "leave_one_out_barycentric",
     "make_predictor",
@@ -132,6 +133,8 @@ RBF_SIGMAS = tuple(float(s) for s in np.geomspace(0.03, 1.0, 19))
 RBF_DROP = 1e-3
 #: Samples the leave-one-light-out choice of sigma reads (a random subset of a big field).
 SIGMA_SAMPLES = 4096
+#: Bytes of predictions :func:`environment_radiance` holds at once (lights x samples x RGB).
+BATCH_BYTES = 256 * 2**20
 
 
 class LightPredictor(Protocol):
@@ -442,6 +445,11 @@ _TRAINED: weakref.WeakKeyDictionary[ReflectanceField, dict[_TrainedKey, LearnedR
 _TRAINED = weakref.WeakKeyDictionary()
 
 
+#: Model fits of in-memory fields (while they live), by the models fitted.
+_FITTED: weakref.WeakKeyDictionary[ReflectanceField, dict[tuple[str, ...], SampleModels]]
+_FITTED = weakref.WeakKeyDictionary()
+
+
 @dataclass
 class _Learned:
     """The learned model of a field.
@@ -499,6 +507,66 @@ class _Learned:
         return _bounded(self.field, camera, out)
 
 
+def environment_radiance(
+    predictor: LightPredictor, camera: int, lights: LightSet, samples: int
+) -> NDArray[np.float32]:
+    """Radiance (P, 3), float32, of ``camera``'s samples under many lights at once.
+
+    The sum over the lights of their rgb (radiance x sr) times the predicted radiance under a
+    directional light of unit irradiance from each direction. The models shade every light in
+    one pass, and what is linear in the measured images (interpolation, residuals, bases)
+    sums the weights first; any other predictor (the learned rung) predicts the lights in
+    batches within :data:`BATCH_BYTES`. Unlike :meth:`LightPredictor.predict` the sum is not
+    bounded per light.
+
+    Parameters
+    ----------
+    predictor : LightPredictor (from :func:`make_predictor`)
+    camera : int
+    lights : LightSet, directions (K, 3) in the rig frame, rgb (K, 3)
+    samples : int, P
+    """
+    rgb = np.asarray(lights.rgb, dtype=np.float64)
+    if isinstance(predictor, _Model):
+        choice = choose_model(predictor.models, candidates=[predictor.name])
+        lighting = prepare_lighting(predictor.models, lights)
+        pinhole = predictor.field.cameras[camera]
+        needed = predictor.field.visibility[camera]
+        return relight_models(predictor.models, choice, lighting, pinhole, needed=needed)
+    if isinstance(predictor, _Residual):
+        base = environment_radiance(predictor.base, camera, lights, samples)
+        residual = predictor._residual_of(camera)
+        return (base + _summed_barycentric(predictor.field, lights, residual)).astype(np.float32)
+    if isinstance(predictor, _Adaptive):
+        share = predictor.share(camera)[:, None]
+        helped = environment_radiance(predictor.residual, camera, lights, samples)
+        alone = _summed_barycentric(predictor.field, lights, predictor.field.camera_slab(camera))
+        return (share * helped + (1.0 - share) * alone).astype(np.float32)
+    out = np.zeros((samples, 3), dtype=np.float64)
+    batch = max(1, min(len(rgb), BATCH_BYTES // max(1, 12 * samples)))
+    for start in range(0, len(rgb), batch):
+        predicted = predictor.predict(camera, lights.directions[start : start + batch])
+        out += np.einsum("qc,qpc->pc", rgb[start : start + batch], predicted)
+    return out.astype(np.float32)
+
+
+def _summed_barycentric(
+    field: ReflectanceField, lights: LightSet, values: NDArray[np.floating]
+) -> NDArray[np.float64]:
+    """Sum over ``lights`` of rgb x the barycentric interpolation of ``values`` (T, P, 3)."""
+    sparse = interpolation_weights(
+        field.light_directions, lights.directions, "barycentric", policy="clamp"
+    )
+    per_light = np.zeros((len(field.light_directions), 3), dtype=np.float64)
+    rgb = np.asarray(lights.rgb, dtype=np.float64)
+    for k in range(sparse.indices.shape[1]):
+        for c in range(3):
+            per_light[:, c] += np.bincount(
+                sparse.indices[:, k], sparse.weights[:, k] * rgb[:, c], len(per_light)
+            )
+    return np.einsum("tc,tpc->pc", per_light, np.asarray(values, dtype=np.float64))
+
+
 def _fitted_models(
     field: ReflectanceField, names: list[str], models: SampleModels | None, progress: bool
 ) -> SampleModels:
@@ -506,7 +574,13 @@ def _fitted_models(
         return models
     if field.radiance_digest is not None:  # a store: its fit is saved beside it and reused
         return models_for_field(field, models=names, progress=progress)
-    return fit_sample_models(field, names, progress=progress)  # held in memory: nothing saved
+    # Held in memory (a split's subset): nothing saved, but kept while the subset lives, so the
+    # rungs built on one model (the model, its residual, the adaptive mixture) fit it once.
+    fitted = _FITTED.setdefault(field, {})
+    key = tuple(sorted(names))
+    if key not in fitted:
+        fitted[key] = fit_sample_models(field, names, progress=progress)
+    return fitted[key]
 
 
 def make_predictor(

@@ -58,7 +58,7 @@ from core.light_set import LightSet
 from core.point_spacing import point_spacing
 from processing.environment import EnvironmentLighting, LightingControls, light_environment
 from processing.interpolation import interpolation_weights
-from processing.panorama import Panorama
+from processing.panorama import Panorama, VisibleEnvironments
 from processing.sample_model_store import models_for_field
 from processing.sample_models import (
     BasisFit,
@@ -469,6 +469,7 @@ class ModelRelighter:
         models: SampleModels | None = None,
     ) -> None:
         self.field = field_store
+        self._visible = VisibleEnvironments(field_store.below_horizon)
         self.settings = settings or ModelRelightSettings()
         self.models = models if models is not None else fit_sample_models(field_store)
         if self.models.sample_count != field_store.shape[2]:
@@ -561,6 +562,7 @@ class ModelRelighter:
         controls = self.settings.lighting_controls(
             yaw_deg=yaw_deg, exposure=exposure, modulation=modulation
         )
+        panorama = self._visible(panorama)
         if self.settings.lighting == "precomputed":
             self._precompute(self._prefiltered(panorama), yaw_deg, exposure)
             self._environment, self._shown = None, (panorama, controls)

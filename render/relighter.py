@@ -24,7 +24,7 @@ from core.light_set import LightSet
 from core.point_spacing import point_spacing
 from processing.environment import EnvironmentLighting, LightingControls, light_environment
 from processing.interpolation import InterpolationMethod, OutsidePolicy
-from processing.panorama import Panorama
+from processing.panorama import Panorama, VisibleEnvironments
 from processing.sample_models import SampleModels
 from processing.sampling import SamplerName
 from render.light_weights import (
@@ -202,6 +202,7 @@ class Relighter:
     def __init__(self, field_store: ReflectanceField, settings: RelightSettings | None = None):
         self.field = field_store
         self.settings = settings or RelightSettings()
+        self._visible = VisibleEnvironments(field_store.below_horizon)
         self._lighting: LightWeights | None = None
         self._environment: EnvironmentLighting | None = None
         self._view: tuple[ViewBlend, SplatPlan | None] | None = None
@@ -239,7 +240,7 @@ class Relighter:
         controls = self.settings.lighting_controls(
             yaw_deg=yaw_deg, exposure=exposure, modulation=modulation
         )
-        self.set_environment(light_environment(panorama, controls))
+        self.set_environment(light_environment(self._visible(panorama), controls))
         return time.perf_counter() - start
 
     def set_environment(self, lighting: EnvironmentLighting) -> None:

@@ -540,8 +540,10 @@ def test_the_real_capture_records_what_it_assumed(loewenkopf: ReflectanceField) 
     assert loewenkopf.provenance["assumed"] == (
         "rti dirs.lp: 240 8-bit images decoded as sRGB (auto: 8-bit is sRGB, 16-bit and float "
         "are linear; transfer 'srgb' or 'linear' overrides); mask: none, every pixel counts; "
-        "intensities: none, the lights are taken as equal"
+        "intensities: none, the lights are taken as equal; below the horizon: blocked by the "
+        "base (environment light from below is dropped)"
     )
+    assert loewenkopf.below_horizon == "blocked"
 
 
 def test_float_images_are_taken_as_stored_whatever_the_transfer(tmp_path: Path) -> None:

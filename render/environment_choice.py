@@ -1,0 +1,228 @@
+"""Which rung relights a field of pixels under a panorama: chosen by held-out error under it.
+
+Under an environment a method is used as a weighted sum of its predictions, so the error that
+matters is not one light's but the panorama's sum's: errors of neighbouring lights partly
+cancel, and the light-stage sum, whose single-light prediction is the nearest measured image,
+does much better under a broad sky than under a sun. The choice therefore looks like the use:
+
+1. the field's lights are split (every other light: gaps as wide as the ones to fill; plus the
+   lowest lights held out when part of the panorama's light lies below the measured lights, so
+   extrapolation is tested where the use extrapolates);
+2. the panorama (as the object sees it: below the horizon blocked when the capture says so)
+   is gathered into the spherical Voronoi cells of the held-out lights, E_j;
+3. the truth is the sum of the held-out images weighted by E_j, and each candidate predicts
+   every held-out light from the fit lights alone and is weighted the same way; its error is
+   the relative RMSE in linear light over the object's pixels, the splits weighted by the share
+   of the panorama's light they stand for (the lowest lights: the share outside the measured
+   lights; every other light: the rest).
+
+The winner is refitted on every light and relights through its engine: the light-stage sum is
+``RelightSettings(scheme="projection")`` (each measured image weighted by the light of its
+Voronoi cell, Debevec et al. 2000), barycentric interpolation the ``pixels`` scheme, the fitted
+model alone :data:`render.relight_mode.MOST_ACCURATE_MODELS`, any other predictor
+:class:`render.predictor_relight.PredictorRelightSettings`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from tqdm import tqdm
+
+from core.errors import InputError
+from core.field_store import ReflectanceField
+from core.light_set import grid_lights
+from processing.image_quality import relative_rmse
+from processing.lights import disassemble_lights
+from processing.measured_region import MeasuredRegion
+from processing.panorama import Panorama
+from render.evaluation import lowest_lights, split_lights
+from render.light_prediction import make_predictor
+from render.predictor_relight import PredictorRelightSettings
+from render.relight_mode import MOST_ACCURATE_MODELS, RelightMode
+from render.relighter import RelightSettings
+
+__all__ = [
+    "ENVIRONMENT_CANDIDATES",
+    "LIGHT_STAGE",
+    "SLOW_CANDIDATES",
+    "CandidateScore",
+    "EnvironmentChoice",
+    "choose_environment_mode",
+    "environment_mode",
+    "held_out_splits",
+]
+
+#: The light-stage sum's name in tables (its single-light predictor is ``nearest``).
+LIGHT_STAGE = "light-stage"
+#: Quick candidates (seconds each on an RTI capture), the baseline first.
+ENVIRONMENT_CANDIDATES = (
+    LIGHT_STAGE,
+    "barycentric",
+    "hsh3",
+    "lambert+ggx",
+    "lambert+ggx+residual",
+    "adaptive",
+)
+#: Candidates that train a network (minutes): left out by ``fast``.
+SLOW_CANDIDATES = ("learned+residual",)
+#: Share of the panorama's light below the measured lights above which extrapolation is tested.
+EXTRAPOLATION_SHARE = 0.02
+#: Rows of the blocks the panorama's light outside the measured region is read from.
+OUTSIDE_GRID = 32
+
+
+@dataclass(frozen=True)
+class CandidateScore:
+    """One candidate's held-out error under the panorama.
+
+    Attributes
+    ----------
+    name : str
+    error : float, relative RMSE (linear light) of the panorama-weighted held-out sum
+    seconds : float, fitting and predicting on the splits
+    note : str, why it could not apply (its error is then infinite)
+    """
+
+    name: str
+    error: float
+    seconds: float
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class EnvironmentChoice:
+    """The chosen mode, every candidate's score and why."""
+
+    mode: RelightMode
+    scores: tuple[CandidateScore, ...]
+    splits: tuple[str, ...]
+    reason: str
+
+
+def environment_mode(name: str, *, progress: bool = False) -> RelightMode:
+    """The relighting mode that relights a field of pixels with candidate ``name``."""
+    if name == LIGHT_STAGE:
+        return RelightSettings(scheme="projection", view_interpolation="nearest")
+    if name == "barycentric":
+        return RelightSettings(
+            scheme="pixels", interpolation="barycentric", view_interpolation="nearest"
+        )
+    if name == "lambert+ggx":
+        return replace(MOST_ACCURATE_MODELS, model="lambert+ggx")
+    return PredictorRelightSettings(method=name, progress=progress)
+
+
+Split = tuple[str, NDArray[np.int64], NDArray[np.int64], float]
+
+
+def held_out_splits(field: ReflectanceField, panorama: Panorama) -> list[Split]:
+    """The (name, fit, test, weight) light splits that resemble relighting under ``panorama``.
+
+    The weights sum to 1: the lowest lights' split weighs the share of the panorama's light
+    outside the measured lights, when above :data:`EXTRAPOLATION_SHARE`.
+    """
+    fit, test = split_lights(field, "every-other")
+    splits = [("every other light", fit, test, 1.0)]
+    grid = grid_lights(panorama.rgb, OUTSIDE_GRID).nonempty()
+    energy = grid.rgb.sum(axis=1)
+    outside = MeasuredRegion.build(field.light_directions).outside(grid.directions)
+    share = float(energy[outside].sum() / energy.sum()) if energy.sum() > 0 else 0.0
+    lowest = lowest_lights(field)
+    if share > EXTRAPOLATION_SHARE and len(lowest) <= field.shape[1] - 3:
+        rest = np.setdiff1d(np.arange(field.shape[1], dtype=np.int64), lowest)
+        splits = [("every other light", fit, test, 1.0 - share),
+                  ("the lowest lights", rest, lowest, share)]  # fmt: skip
+    return splits
+
+
+def _weighted_truth(
+    field: ReflectanceField, panorama: Panorama, test: NDArray[np.int64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The held-out lights' cell energies (Q, 3) and the truth they weight (P, 3)."""
+    cells = disassemble_lights(panorama.rgb, field.light_directions[test])
+    slab = field.camera_slab(0)[test]
+    return cells.rgb, np.einsum("qc,qpc->pc", cells.rgb, slab.astype(np.float64))
+
+
+def choose_environment_mode(
+    field: ReflectanceField,
+    panorama: Panorama,
+    *,
+    candidates: Sequence[str] | None = None,
+    fast: bool = False,
+    progress: bool = False,
+) -> EnvironmentChoice:
+    """Choose how a field of pixels is relit under ``panorama`` (see the module).
+
+    Parameters
+    ----------
+    field : ReflectanceField of pixels (one view)
+    panorama : Panorama, as the object sees it (yaw, exposure and the horizon applied)
+    candidates : names, optional; default :data:`ENVIRONMENT_CANDIDATES` and, unless ``fast``,
+        :data:`SLOW_CANDIDATES`
+    fast : bool, leave out the candidates that train a network
+    progress : bool, a progress bar over the candidates
+
+    Raises
+    ------
+    InputError
+        A field of points, or a field too small to split (fewer than six lights).
+    """
+    if field.image_shape is None:
+        raise InputError(f"{field.path}: the environment choice is made for fields of pixels")
+    names = list(candidates or (*ENVIRONMENT_CANDIDATES, *(() if fast else SLOW_CANDIDATES)))
+    seen = field.visibility[0]
+    splits = held_out_splits(field, panorama)
+    errors: dict[str, list[float]] = {name: [] for name in names}
+    seconds = dict.fromkeys(names, 0.0)
+    notes: dict[str, str] = {}
+    bar = tqdm(total=len(names) * len(splits), desc="choosing", unit="method",
+               disable=not progress)  # fmt: skip
+    try:
+        for _, fit, test, weight in splits:
+            weights, truth = _weighted_truth(field, panorama, test)
+            part = field.subset(lights=fit)
+            for name in names:
+                start = time.perf_counter()
+                try:
+                    predictor = make_predictor(part, "nearest" if name == LIGHT_STAGE else name)
+                    predicted = predictor.predict(0, field.light_directions[test])
+                except InputError as error:  # a basis with more terms than the split's lights
+                    errors[name].append(math.inf * weight)
+                    notes[name] = str(error)
+                else:
+                    estimate = np.einsum("qc,qpc->pc", weights, predicted.astype(np.float64))
+                    rmse = relative_rmse(estimate[None, seen], truth[None, seen])
+                    errors[name].append(weight * rmse)
+                seconds[name] += time.perf_counter() - start
+                bar.update()
+    finally:
+        bar.close()
+    scores = tuple(
+        sorted(
+            (
+                CandidateScore(n, float(np.sum(errors[n])), seconds[n], notes.get(n, ""))
+                for n in names
+            ),
+            key=lambda score: score.error,
+        )
+    )
+    best = scores[0]
+    stage = next((s for s in scores if s.name == LIGHT_STAGE), None)
+    against = (
+        f", the light-stage sum {stage.error:.1%}" if stage is not None and best != stage else ""
+    )
+    how = " and ".join(f"{name}, {weight:.0%}" for name, _, _, weight in splits)
+    reason = (
+        f"{best.name} predicts held-out lights ({how}) summed under this panorama with "
+        f"{best.error:.1%} error{against} ({sum(seconds.values()):.0f} s to choose among "
+        f"{len(names)})"
+    )
+    mode = environment_mode(best.name, progress=progress)
+    return EnvironmentChoice(mode, scores, tuple(name for name, _, _, _ in splits), reason)

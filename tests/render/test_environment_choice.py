@@ -1,0 +1,122 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.directions import hemisphere_layout, panorama_solid_angles
+from core.field_store import ReflectanceField
+from processing.panorama import block_below_horizon, panorama_from_array, visible_environment
+from processing.rti import import_rti, write_rti_capture
+from render.environment_choice import (
+    ENVIRONMENT_CANDIDATES,
+    LIGHT_STAGE,
+    choose_environment_mode,
+    environment_mode,
+    held_out_splits,
+)
+from render.predictor_relight import PredictorRelightSettings
+
+ALBEDO = 0.6
+
+
+def _lambertian_capture(folder: Path, lights: int = 49) -> Path:
+    """An RTI capture of a white-ish Lambertian plane facing the camera (and the sky)."""
+    directions = hemisphere_layout(lights, "fibonacci")
+    shading = ALBEDO / np.pi * np.clip(directions[:, 2], 0.0, None)
+    images = np.broadcast_to(shading[:, None, None, None], (lights, 6, 8, 3))
+    return write_rti_capture(folder, "dome", images, directions, scale=1.0)
+
+
+@pytest.fixture(scope="module")
+def plane(tmp_path_factory: pytest.TempPathFactory) -> ReflectanceField:
+    folder = tmp_path_factory.mktemp("plane")
+    lp = _lambertian_capture(folder / "capture")
+    return import_rti(lp, folder / "field.zarr", progress=False)
+
+
+def _white_sky() -> object:
+    return panorama_from_array(np.ones((32, 64, 3), dtype=np.float32), source="white sky")
+
+
+def test_blocking_the_horizon_removes_the_lower_half_of_the_light() -> None:
+    sky = panorama_from_array(np.ones((33, 66, 3), dtype=np.float32))
+    blocked = block_below_horizon(sky)
+    omega = panorama_solid_angles(33, 66)
+    total = float((sky.rgb[..., 0] * omega).sum())
+    kept = float((blocked.rgb[..., 0] * omega).sum())
+    assert kept == pytest.approx(total / 2, rel=1e-6)
+    assert np.all(blocked.rgb[:16] == 1.0) and np.all(blocked.rgb[17:] == 0.0)
+    assert visible_environment(sky, "open") is sky
+
+
+def test_an_rti_import_states_a_blocked_horizon_and_a_store_can_restate_it(
+    plane: ReflectanceField,
+) -> None:
+    assert plane.below_horizon == "blocked"
+    assert plane.stating(below_horizon="open").below_horizon == "open"
+    assert plane.below_horizon == "blocked"
+
+
+@pytest.mark.parametrize("name", [LIGHT_STAGE, "barycentric", "lambert+ggx+residual"])
+def test_a_plane_on_its_base_under_a_white_sky_has_the_albedo_as_radiance(
+    plane: ReflectanceField, name: str
+) -> None:
+    # Radiance of a Lambertian plane under a uniform sky of radiance 1 over the upper
+    # hemisphere: albedo / pi x pi. Spreading the sky below the horizon onto the lowest lights
+    # made it 1.3x too bright (issue 25).
+    engine = environment_mode(name).open(plane)
+    engine.set_lighting(_white_sky())  # type: ignore[arg-type]
+    engine.set_view(plane.cameras[0])
+    relit = engine.render().rgb
+    assert float(relit.mean()) == pytest.approx(ALBEDO, rel=0.06)
+    if name == "lambert+ggx+residual":
+        return  # the model knows a plane facing up sees nothing from below: no change to show
+    opened = environment_mode(name).open(plane.stating(below_horizon="open"))
+    opened.set_lighting(_white_sky())  # type: ignore[arg-type]
+    opened.set_view(plane.cameras[0])
+    assert float(opened.render().rgb.mean()) > 1.05 * float(relit.mean())
+
+
+def test_the_choice_scores_every_quick_candidate_and_opens_the_winner(
+    plane: ReflectanceField,
+) -> None:
+    sky = visible_environment(_white_sky(), plane.below_horizon)  # type: ignore[arg-type]
+    choice = choose_environment_mode(plane, sky, fast=True)
+    assert {s.name for s in choice.scores} == set(ENVIRONMENT_CANDIDATES)
+    assert all(np.isfinite(s.error) and s.error >= 0 for s in choice.scores)
+    assert choice.scores[0].error <= min(s.error for s in choice.scores)
+    assert choice.scores[0].name in choice.reason
+    engine = choice.mode.open(plane)
+    engine.set_lighting(sky)
+    engine.set_view(plane.cameras[0])
+    assert engine.render().rgb.shape == (6, 8, 3)
+
+
+def test_the_lowest_ring_is_held_out_when_the_panorama_lights_from_below_the_lights(
+    plane: ReflectanceField,
+) -> None:
+    overhead = np.zeros((32, 64, 3), dtype=np.float32)
+    overhead[:4] = 1.0
+    assert [(n, w) for n, _, _, w in held_out_splits(plane, panorama_from_array(overhead))] == [
+        ("every other light", 1.0)
+    ]
+    low = np.zeros((32, 64, 3), dtype=np.float32)
+    low[14:16] = 1.0  # just above the horizon, under the dome's lowest lights
+    splits = held_out_splits(plane, panorama_from_array(low))
+    assert [n for n, _, _, _ in splits] == ["every other light", "the lowest lights"]
+    assert splits[1][3] > 0.2 and sum(w for _, _, _, w in splits) == pytest.approx(1.0)
+    _, fit, test, _ = splits[1]
+    assert np.intersect1d(fit, test).size == 0 and len(fit) + len(test) == plane.shape[1]
+
+
+def test_a_predictor_mode_refuses_a_field_of_points_with_what_to_do(tmp_path: Path) -> None:
+    from core.errors import InputError
+    from sim.field import field_cameras, simulate_field
+
+    cameras = field_cameras(2, "grid", distance=4.0, fov_deg=40.0, width=16, height=16)
+    store = simulate_field(tmp_path / "f.zarr", "diffuse-sphere", lights=6, cameras=cameras,
+                           points=200, progress=False)  # fmt: skip
+    with pytest.raises(InputError, match="field of points"):
+        PredictorRelightSettings(method="lambert+ggx+residual").open(ReflectanceField.open(store))
