@@ -513,7 +513,8 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         description="Path-trace a world (sim/worlds or a world .toml) seen from straight above "
         "under a dome of directional lights, as an RTI dome records it: linear 16-bit TIFF "
         "images, fit.lp (the lights to fit, a Fibonacci dome) and test.lp (other lights, a "
-        "grid, to predict), with masks of the object (fit.mask.png, test.mask.png). Then: "
+        "grid, to predict), with masks of the object (fit.mask.png, test.mask.png); --format jpeg "
+        "writes 8-bit sRGB JPEG instead of the TIFFs. Then: "
         "rig evaluate DIR/fit.lp --test DIR/test.lp.",
     )
     rti.add_argument("--scene", required=True, help="world name (sim/worlds) or world .toml")
@@ -523,6 +524,9 @@ def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     rti.add_argument("--size", type=image_size, default=(128, 96), help="WxH (default 128x96)")
     rti.add_argument("--spp", type=count, default=256, help="samples per pixel (default 256)")
     rti.add_argument("--max-depth", type=count, default=8, help="path length (default 8)")
+    rti.add_argument("--format", choices=("tiff16", "jpeg"), default="tiff16",
+                     help="images: linear 16-bit TIFF (default) or 8-bit sRGB JPEG, as public "
+                     "RTI benchmarks ship them")  # fmt: skip
     rti.add_argument("-o", "--output", type=output_directory, required=True, help="new folder")
     rti.set_defaults(handler=_run_sim_rti)
 
@@ -603,7 +607,8 @@ def _run_sim_rti(args: argparse.Namespace) -> int:
     world = load_world(args.scene)  # a bad world is refused before anything renders
     width, height = args.size
     spec = (args.lights, args.test_lights, width, height, args.spp)
-    make_world_rti(out, str(world.source), spec, max_depth=args.max_depth, progress=True)
+    make_world_rti(out, str(world.source), spec, max_depth=args.max_depth,
+                   image_format=args.format, progress=True)  # fmt: skip
     print(f"{world.name}: {args.lights} fit + {args.test_lights} test lights, {width}x{height}, "
           f"{args.spp} spp -> {out}/ (rig evaluate {out / 'fit.lp'} --test "
           f"{out / 'test.lp'})")  # fmt: skip

@@ -176,12 +176,15 @@ def make_world_rti(
     spec: RtiSpec,
     *,
     max_depth: int = DEFAULT_MAX_DEPTH,
+    image_format: Literal["tiff16", "jpeg"] = "tiff16",
     progress: bool = False,
 ) -> None:
     """Path-trace an RTI capture of ``world`` into ``folder``: fit.lp, test.lp, images, masks.
 
     The fit lights are a Fibonacci dome, the test lights a grid (the two never coincide); one
-    exposure for both sets puts 90 % of 16-bit white at the object's 99.9th percentile.
+    exposure for both sets puts 90 % of white at the object's 99.9th percentile. Images are
+    linear 16-bit TIFF or, with ``image_format="jpeg"``, 8-bit sRGB JPEG as public benchmarks
+    ship them (:func:`processing.rti.write_rti_capture`).
     """
     fit_count, test_count, width, height, spp = spec
     fit = render_world_rti(world, fit_count, width=width, height=height, spp=spp,
@@ -194,7 +197,7 @@ def make_world_rti(
     for name, capture in (("fit", fit), ("test", test)):
         directions = rig_to_camera(capture.directions, capture.camera)
         write_rti_capture(folder, name, capture.images, directions, scale=scale,
-                          mask=capture.alpha >= 0.5)  # fmt: skip
+                          mask=capture.alpha >= 0.5, image_format=image_format)  # fmt: skip
 
 
 def world_rti_captures(

@@ -22,6 +22,7 @@ from capture.dataset import Dataset
 from capture.verify import VerifyReport
 from core.camera_model import RigCamera
 from core.errors import DatasetError, InputError
+from core.field_store import BELOW_HORIZON
 from processing.decode import decode_image
 from processing.field_builder import FieldBuildReport, build_field
 from processing.point_cloud import PointCloud, read_point_cloud
@@ -143,6 +144,22 @@ def dataset_camera_model(
     return RigCamera(float(distance), float(fov_deg), width, height)
 
 
+def _light_model(dataset: Dataset, sources: FieldSources) -> dict[str, Any]:
+    """The store's light model: the sources', stating what lies below the horizon.
+
+    The sources' statement wins (a simulated scene knows it floats), else the rig config
+    snapshot's, else ``"blocked"`` (an object stands on a base or turntable).
+    """
+    model = dict(sources.light_model or {"type": "directional", "irradiance": 1.0})
+    stated = model.get("below_horizon", dataset.rig_config.get("below_horizon", "blocked"))
+    if stated not in BELOW_HORIZON:
+        raise DatasetError(
+            f"{dataset.path}: the rig config snapshot says below_horizon = {stated!r}; it must "
+            f"be one of {', '.join(BELOW_HORIZON)}"
+        )
+    return model | {"below_horizon": stated}
+
+
 def process_dataset(
     dataset: Dataset | str | os.PathLike[str],
     output: str | os.PathLike[str],
@@ -205,7 +222,7 @@ def process_dataset(
         allow_missing=allow_missing,
         dtype=dtype,
         demosaic=demosaic,
-        light_model=sources.light_model,
+        light_model=_light_model(data, sources),
         provenance={"tool": "rig process", **sources.provenance},
         progress=progress,
         overwrite=overwrite,

@@ -28,13 +28,14 @@ import tempfile
 from collections.abc import Iterator, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from tqdm import tqdm
 
 from core.camera_model import PinholeCamera, camera_to_rig, rig_to_camera
+from core.colour import linear_to_srgb
 from core.errors import DatasetError, InputError
 from core.field_store import BELOW_HORIZON, BelowHorizon, FieldStoreWriter, ReflectanceField
 from core.image_io import (
@@ -451,6 +452,7 @@ def write_rti_capture(
     *,
     scale: float,
     mask: NDArray[np.bool_] | None = None,
+    image_format: Literal["tiff16", "jpeg"] = "tiff16",
 ) -> Path:
     """Write an RTI capture as a dome would leave it: images, ``NAME.lp`` and ``NAME.mask.png``.
 
@@ -462,20 +464,29 @@ def write_rti_capture(
     directions : array_like, shape (T, 3), toward each light in the camera frame
     scale : float > 0, the radiance written as 16-bit white (values above are clipped)
     mask : ndarray (H, W) of bool, or None: the object's pixels (the sidecar the import reads)
+    image_format : {"tiff16", "jpeg"}
+        ``tiff16``: linear 16-bit TIFF (``images/NAME_NNN.tif``); ``jpeg``: 8-bit sRGB JPEG of
+        quality 95 (``.jpg``), as public RTI benchmarks and most domes ship them.
+        :func:`import_rti` reads 16-bit as linear and 8-bit as sRGB by default.
 
     Returns
     -------
-    Path of the ``.lp`` file. Images are linear 16-bit TIFF (:func:`import_rti` reads 16-bit
-    as linear by default).
+    Path of the ``.lp`` file.
     """
     root = Path(folder)
     pictures = np.asarray(images, dtype=np.float64)
     if pictures.ndim != 4 or pictures.shape[3] != 3 or not scale > 0:
         raise InputError(f"images must be (T, H, W, 3) and scale positive, got {pictures.shape}")
-    files = [f"images/{name}_{t:03d}.tif" for t in range(len(pictures))]
+    if image_format not in ("tiff16", "jpeg"):
+        raise InputError(f"image format must be 'tiff16' or 'jpeg', got {image_format!r}")
+    suffix = ".tif" if image_format == "tiff16" else ".jpg"
+    files = [f"images/{name}_{t:03d}{suffix}" for t in range(len(pictures))]
     for file, image in zip(files, pictures, strict=True):
-        levels = np.round(np.clip(image * scale, 0.0, 1.0) * 65535.0).astype(np.uint16)
-        write_linear16_tiff(root / file, levels)
+        unit = np.clip(image * scale, 0.0, 1.0)
+        if image_format == "tiff16":
+            write_linear16_tiff(root / file, np.round(unit * 65535.0).astype(np.uint16))
+        else:
+            write_srgb8(root / file, np.round(linear_to_srgb(unit) * 255.0).astype(np.uint8))
     lp = root / f"{name}.lp"
     write_lp(lp, files, directions)
     if mask is not None:

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from core.errors import ConfigError, InputError
+from core.field_store import BELOW_HORIZON, BelowHorizon
 from rig.config_cameras import (
     CameraConfig,
     CameraFaultConfig,
@@ -238,6 +239,10 @@ class RigConfig:
     servos, gantry : the serial devices; present exactly when an axis (or the light) needs them
     light, camera, safety : see their classes
     park : RigPose, where the rig rests between sessions and after an error
+    below_horizon : {"blocked", "open"}, what lies below the object's horizon (its base or
+        turntable blocks the environment, the usual case; or the object hangs free): the
+        statement every field built from the rig's captures carries
+        (:data:`core.field_store.BELOW_HORIZON`)
     source : Path or None, the file it was read from (not compared)
     """
 
@@ -249,9 +254,16 @@ class RigConfig:
     light: LightConfig = field(default_factory=LightConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     name: str = "rig"
+    below_horizon: BelowHorizon = "blocked"
     source: Path | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
+        _check(
+            self.below_horizon in BELOW_HORIZON,
+            "below_horizon",
+            self.below_horizon,
+            f"is not one of {', '.join(BELOW_HORIZON)}",
+        )
         for role, axis in self.axes.items():
             _check(role == axis.role, f"axes.{role}.role", axis.role, f"does not match {role!r}")
         missing = [role for role in REQUIRED_ROLES if role not in self.axes]
@@ -293,7 +305,11 @@ class RigConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """The config as the nested tables of its TOML form (None values left out)."""
-        document: dict[str, Any] = {"schema_version": SCHEMA_VERSION, "name": self.name}
+        document: dict[str, Any] = {
+            "schema_version": SCHEMA_VERSION,
+            "name": self.name,
+            "below_horizon": self.below_horizon,
+        }
         for section, value in (("servos", self.servos), ("gantry", self.gantry)):
             if value is not None:
                 document[section] = {f.name: getattr(value, f.name) for f in fields(value)}
@@ -383,6 +399,7 @@ def _parse(root: Table, source: Path | None) -> RigConfig:
         f"is not supported (this program reads {SCHEMA_VERSION})",
     )
     name = root.string("name", "rig")
+    below_horizon = root.string("below_horizon", "blocked", choices=BELOW_HORIZON)
     servos_table = root.table("servos", required=False)
     servos = None
     if servos_table is not None:
@@ -444,6 +461,7 @@ def _parse(root: Table, source: Path | None) -> RigConfig:
         light=light,
         safety=safety,
         name=name,
+        below_horizon=below_horizon,
         source=source,
     )
 
@@ -521,4 +539,6 @@ def simulated_config(
         gantry=GantryConfig(port=gantry_port),
         safety=SafetyConfig(min_separation_deg=10.0),
         name=name,
+        # The simulator's scenes float: its ground truth lights them from every direction.
+        below_horizon="open",
     )

@@ -73,10 +73,16 @@ def simulated_capture_sources(
         raise InputError("not a simulated capture: no synthetic scene to take the points from")
     count = points or int(camera.get("points", 20_000))
     samples = build_scene(name, count)
-    light_model = None
+    # The synthetic scenes float: their ground truth is lit from every direction.
+    light_model: dict[str, Any] = {
+        "type": "directional",
+        "irradiance": 1.0,
+        "below_horizon": "open",
+    }
     if simulated and camera.get("light_distance") is not None:
         distance = float(camera["light_distance"])
-        light_model = {"type": "point", "distance": distance, "irradiance_at_origin": 1.0}
+        light_model = {"type": "point", "distance": distance, "irradiance_at_origin": 1.0,
+                       "below_horizon": "open"}  # fmt: skip
     return SimulatedSources(
         points=samples.points,
         normals=samples.normals,

@@ -278,6 +278,7 @@ BAD_CONFIGS: list[tuple[str, Callable[[dict[str, Any]], None], str]] = [
         r"light\.max_s does not apply to coolant control",
     ),
     ("unsupported schema", _set("schema_version", 2), r"schema_version = 2 is not supported"),
+    ("below the horizon", _set("below_horizon", "floor"), r"below_horizon"),
 ]
 
 
@@ -359,3 +360,15 @@ def test_the_example_config_fits_its_servos_in_one_turn() -> None:
     config = load_config(Path(__file__).resolve().parents[2] / "docs" / "rig.example.toml")
     axes = [servo_axis(a) for a in config.axes.values() if a.device == "dynamixel"]
     DynamixelChain._check_axes("example", axes)
+
+
+def test_a_rig_states_what_lies_below_its_horizon(example_data: dict[str, Any]) -> None:
+    # The usual rig: the object on a base or turntable, which hides the environment below.
+    assert load_config(EXAMPLE).below_horizon == "blocked"
+    data = copy.deepcopy(example_data)
+    data["below_horizon"] = "open"
+    config = parse_config(data)
+    assert config.below_horizon == "open"
+    assert parse_config(tomllib.loads(config.to_toml())) == config
+    # The simulator's scenes float (its ground truth lights them from below too).
+    assert simulated_config("/dev/pts/7", "/dev/pts/8").below_horizon == "open"
