@@ -662,7 +662,8 @@ class ModelRelighter:
                     f"{f.path} holds the pixels of one view; it cannot be seen from "
                     f"({camera.azimuth_deg:g}, {camera.inclination_deg:g})"
                 )
-            self._view = (camera, None, np.ones(f.shape[2], dtype=bool))
+            # The object's pixels (a mask's others are no samples: not holes, just not shown).
+            self._view = (camera, None, f.visibility[0].copy())
         else:
             assert f.points is not None and f.normals is not None
             if self._spacing is None:

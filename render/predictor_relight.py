@@ -190,8 +190,10 @@ class PredictorRelighter:
             raise InputError("set a lighting before rendering")
         start = time.perf_counter()
         if self._radiance is None:
-            self._radiance = environment_radiance(
-                self.predictor, 0, self._lights, self.field.shape[2]
+            radiance = environment_radiance(self.predictor, 0, self._lights, self.field.shape[2])
+            # A mask's other pixels are no samples: black, as every engine leaves them.
+            self._radiance = np.where(self.field.visibility[0][:, None], radiance, 0.0).astype(
+                np.float32
             )
         assert self.field.image_shape is not None
         height, width = self.field.image_shape
@@ -200,7 +202,7 @@ class PredictorRelighter:
             rgb=self._radiance.reshape(height, width, 3),
             coverage=seen.reshape(height, width),
             radiance=self._radiance,
-            needed=np.ones(len(seen), dtype=bool),
+            needed=seen.copy(),
             holes=np.zeros(len(seen), dtype=bool),
             outside_fraction=self._outside,
             seconds={"relight": time.perf_counter() - start},
