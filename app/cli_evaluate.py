@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 from pathlib import Path
 from typing import Any
 
@@ -54,7 +55,7 @@ def add_evaluate(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
         "store of the same views under other lights), or a split of the field's own lights. "
         "Prints a table (best PSNR first); --json and --markdown save it. Methods: "
         + ", ".join(PREDICTORS)
-        + ".",
+        + "; auto (auto-fast): what rig relight --lights chooses (among the quick rungs).",
     )
     p.add_argument("field", type=Path, help="field store or RTI capture (.lp or its folder)")
     test = p.add_mutually_exclusive_group(required=True)
@@ -79,9 +80,10 @@ def add_evaluate(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
 
 
 def _methods(text: str) -> tuple[str, ...]:
+    from render.evaluation import CHOSEN
     from render.light_prediction import PREDICTORS
 
-    return names_among(text, PREDICTORS, "method")
+    return names_among(text, (*PREDICTORS, *CHOSEN), "method")
 
 
 def _read_mask(path: Path, shape: tuple[int, int] | None) -> Any:
@@ -145,57 +147,6 @@ def _lp_names(path: Path) -> list[str]:
     return list(read_lp(path).files)
 
 
-#: Methods ``rig relight --lights`` chooses among by held-out splits of the field's lights:
-#: the interpolations, the RTI tools' fits (PTM and HSH on 8-bit values and in linear light),
-#: the models with their residual; then, unless ``--fast``, the learned rung.
-AUTO_CANDIDATES = (
-    "barycentric",
-    "rbf",
-    "ptm-8bit",
-    "hsh3-8bit",
-    "hsh3",
-    "lambert+ggx+residual",
-    "adaptive",
-)
-SLOW_CANDIDATES = ("learned+residual",)
-
-
-def choose_light_method(field: Any, queries: Any, *, fast: bool) -> str:
-    """The method of the best held-out PSNR on splits of ``field``'s lights like the use.
-
-    Every other light is held out (gaps as wide as the ones to fill); when a query lies outside
-    the measured lights (below the lowest ring) the lowest lights are held out too, so the choice
-    tests extrapolation where the use extrapolates. Scores are the mean PSNR over the splits.
-    """
-    import numpy as np
-
-    from processing.measured_region import MeasuredRegion
-    from render.evaluation import evaluate, lowest_lights, split_lights
-
-    splits = [("every other light", *split_lights(field, "every-other"))]
-    lowest = lowest_lights(field)
-    outside = MeasuredRegion.build(field.light_directions).outside(queries)
-    if outside.any() and len(lowest) <= field.shape[1] - 3:
-        rest = np.setdiff1d(np.arange(field.shape[1]), lowest)
-        splits.append(("the lowest lights", rest, lowest))
-    candidates = AUTO_CANDIDATES if fast else AUTO_CANDIDATES + SLOW_CANDIDATES
-    psnr: dict[str, list[float]] = {name: [] for name in candidates}
-    seconds = dict.fromkeys(candidates, 0.0)
-    for _, fit_index, test_index in splits:
-        trial = evaluate(field.subset(lights=fit_index), field.subset(lights=test_index),
-                         candidates, progress=True)  # fmt: skip
-        for result in trial.methods:
-            psnr[result.name].append(result.mean.psnr if result.mean is not None else -np.inf)
-            seconds[result.name] += result.seconds
-    ranked = sorted(candidates, key=lambda name: -float(np.mean(psnr[name])))
-    for name in ranked:
-        print(f"  {name:<22} {np.mean(psnr[name]):6.2f} dB  ({seconds[name]:.1f} s)")
-    how = " and ".join(name for name, _, _ in splits)
-    print(f"method: {ranked[0]} (best held-out PSNR, {how}; chosen in "
-          f"{sum(seconds.values()):.0f} s among {len(candidates)})")  # fmt: skip
-    return ranked[0]
-
-
 def relight_lights(args: argparse.Namespace, field: Any) -> int:
     """``rig relight FIELD --lights FILE.lp -o DIR``: one image per line of the ``.lp`` file.
 
@@ -211,6 +162,7 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
     from processing.image_quality import display_8bit, display_scale
     from processing.rti_lp import read_lp
     from render.light_prediction import make_predictor
+    from render.rung_choice import choose_light_rung
 
     directory = require_output(args.output, directory=True)
     lights = read_lp(args.lights)
@@ -227,8 +179,17 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
     # The light-stage sum's image under one light is the nearest measured image.
     method = "nearest" if args.method == "light-stage" else args.method
     if method == "auto":
-        method = choose_light_method(field, directions, fast=args.fast)
-    predictor = make_predictor(field, method, progress=True)
+        choice = choose_light_rung(field, directions, fast=args.fast, progress=True)
+        for score in choice.scores:
+            psnr = f"{score.psnr:6.2f} dB" if math.isfinite(score.psnr) else "   n/a   "
+            note = f" {score.note}" if score.note else ""
+            print(f"  {score.name:<22} {psnr}  ({score.seconds:.1f} s){note}")
+        method = choice.describe()
+        print(f"method: {method} (best held-out PSNR, {' and '.join(choice.folds)}; chosen in "
+              f"{sum(s.seconds for s in choice.scores if s.name != 'mixture'):.0f} s)")  # fmt: skip
+        predictor = choice.predictor(field, progress=True)
+    else:
+        predictor = make_predictor(field, method, progress=True)
     predicted = predictor.predict(camera, directions)
     scale = (
         1.0

@@ -48,11 +48,12 @@ from core.image_io import TransferChoice
 from core.point_spacing import point_spacing
 from processing.image_quality import ImageQuality, display_8bit, display_scale, image_quality
 from processing.rti import import_rti
-from render.light_prediction import PREDICTORS, make_predictor
+from render.light_prediction import PREDICTORS, LightPredictor, make_predictor
 from render.splat import plan_splats, splat
 
 __all__ = [
     "CHOICE_SAMPLES",
+    "CHOSEN",
     "SPLITS",
     "Evaluation",
     "HeldOutError",
@@ -65,6 +66,9 @@ __all__ = [
     "test_field_from_lp",
 ]
 
+#: The product's own choice as a method: ``rig relight --lights``'s automatic rung (with
+#: ``-fast``: the quick rungs only), chosen on the fit lights for the test lights' directions.
+CHOSEN = ("auto", "auto-fast")
 #: Ways :func:`split_lights` splits one capture.
 SPLITS = ("every-other", "rings", "random")
 #: Inclinations closer than this (degrees) belong to one ring.
@@ -388,7 +392,11 @@ def _score_method(
     s_count, t_test, _ = test.shape
     start = time.perf_counter()
     try:
-        predictor = make_predictor(fit, name, scale=scale)
+        predictor = (
+            _chosen(fit, test, fast=name == "auto-fast")
+            if name in CHOSEN
+            else make_predictor(fit, name, scale=scale)
+        )
         predicted = {s: predictor.predict(s, test.light_directions) for s in range(s_count)}
     except RigError as error:
         return MethodResult(name, None, (), 0.0, 0.0, f"not applicable: {error}")
@@ -410,6 +418,14 @@ def _score_method(
     sigma = getattr(predictor, "sigma", None)
     note = f"sigma {sigma:.3g}" if isinstance(sigma, float) else ""
     return MethodResult(name, mean, scores, elapsed, per_image_ms, note)
+
+
+def _chosen(fit: ReflectanceField, test: ReflectanceField, *, fast: bool) -> LightPredictor:
+    """What ``rig relight --lights`` predicts ``test``'s lights with: its choice on ``fit``."""
+    from render.rung_choice import choose_light_rung  # it splits with this module's functions
+
+    choice = choose_light_rung(fit, test.light_directions, fast=fast)
+    return choice.predictor(fit)
 
 
 def _score_on_worker(

@@ -88,6 +88,7 @@ __all__ = [
     "RBF_DROP",
     "RBF_SIGMAS",
     "LightPredictor",
+    "MixturePredictor",
     "PredictorName",
     "bound_factor",
     "choose_rbf_sigma",
@@ -507,6 +508,37 @@ class _Learned:
         return _bounded(self.field, camera, out)
 
 
+@dataclass
+class MixturePredictor:
+    """Several predictors of one field of pixels, mixed per pixel by fixed weights.
+
+    Attributes
+    ----------
+    field : ReflectanceField
+    members : list of LightPredictor, M of them
+    weights : ndarray, shape (M, P), float32, each pixel's weights (summing to 1)
+    name : str
+    """
+
+    field: ReflectanceField
+    members: list[LightPredictor]
+    weights: NDArray[np.float32]
+    name: str = "mixture"
+
+    def __post_init__(self) -> None:
+        expected = (len(self.members), self.field.shape[2])
+        if self.weights.shape != expected:
+            raise InputError(f"mixture weights must have shape {expected}, got "
+                             f"{self.weights.shape}")  # fmt: skip
+
+    def predict(self, camera: int, directions: NDArray[np.floating]) -> NDArray[np.float32]:
+        """Radiance (Q, P, 3): the members' predictions mixed per pixel."""
+        out = np.zeros((len(np.atleast_2d(directions)), self.field.shape[2], 3), np.float32)
+        for member, weight in zip(self.members, self.weights, strict=True):
+            out += weight[None, :, None] * member.predict(camera, directions)
+        return out
+
+
 def environment_radiance(
     predictor: LightPredictor, camera: int, lights: LightSet, samples: int
 ) -> NDArray[np.float32]:
@@ -537,6 +569,11 @@ def environment_radiance(
         base = environment_radiance(predictor.base, camera, lights, samples)
         residual = predictor._residual_of(camera)
         return (base + _summed_barycentric(predictor.field, lights, residual)).astype(np.float32)
+    if isinstance(predictor, MixturePredictor):
+        mixed = np.zeros((samples, 3), dtype=np.float64)
+        for member, weight in zip(predictor.members, predictor.weights, strict=True):
+            mixed += weight[:, None] * environment_radiance(member, camera, lights, samples)
+        return mixed.astype(np.float32)
     if isinstance(predictor, _Adaptive):
         share = predictor.share(camera)[:, None]
         helped = environment_radiance(predictor.residual, camera, lights, samples)

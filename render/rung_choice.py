@@ -1,0 +1,408 @@
+"""Which rung predicts a field's unmeasured lights: one, or several mixed per pixel.
+
+``rig relight --lights`` (and any caller that wants the best prediction of new lights) asks
+every rung the same question on the field's own lights, in folds that look like the use:
+
+- every other light held out, and the same split swapped (the fit lights and the test lights
+  trade places), so every light is predicted once from neighbours as far as the ones to fill;
+- when a requested light lies outside the measured lights (below the lowest ring), the lowest
+  sixth of the lights held out as well (:func:`render.evaluation.lowest_lights`): extrapolation
+  is tested where the use extrapolates.
+
+Each candidate's score is the PSNR of the 8-bit sRGB images (the RTI literature's metric) over
+every fold's test images. Objects mix materials (a matte base, a glossy figure, metal inlays),
+and the best rung differs between them; so the best :data:`MIXED` candidates are also mixed
+per pixel, each pixel weighting a member by the inverse of its held-out error there (smoothed
+over a few pixels). The mixture is scored honestly: a fold's weights come from the errors of
+the other folds only. The winner, a rung or the mixture, is refitted on every light.
+
+Fields of pixels mix; a field of points chooses one rung (its samples have no image grid to
+smooth the errors over).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from dataclasses import field as default
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from tqdm import tqdm
+
+from core.colour import linear_to_srgb
+from core.directions import angle_between
+from core.errors import InputError
+from core.field_store import ReflectanceField
+from processing.image_quality import display_scale
+from processing.measured_region import MeasuredRegion
+from render.evaluation import lowest_lights, split_lights
+from render.light_prediction import LightPredictor, MixturePredictor, make_predictor
+
+__all__ = [
+    "GAP_EXPONENT",
+    "LIGHT_CANDIDATES",
+    "MIXED",
+    "SLOW_CANDIDATES",
+    "RungChoice",
+    "RungScore",
+    "UseGaps",
+    "choose_light_rung",
+    "light_folds",
+]
+
+#: Quick candidates: the interpolations, the RTI tools' fits (on 8-bit values as they fit
+#: them, and in linear light), the models with their residual.
+LIGHT_CANDIDATES = (
+    "barycentric",
+    "rbf",
+    "ptm-8bit",
+    "hsh3-8bit",
+    "hsh3",
+    "lambert+ggx+residual",
+    "adaptive",
+)
+#: Candidates that train a network: left out by ``fast``.
+SLOW_CANDIDATES = ("learned+residual",)
+#: Members of a mixture: the best candidates by score.
+MIXED = 3
+#: Gaussian width (pixels) the per-pixel errors are smoothed with before they weight.
+ERROR_BLUR_PX = 1.5
+#: A mixture wins only by at least this much (dB): a tie keeps the simpler single rung.
+MIXTURE_MARGIN_DB = 0.05
+#: Bytes of held-out predictions kept for the mixture; a larger field chooses one rung.
+MIXTURE_BYTES = 1536 * 2**20
+
+#: How the use's error grows with its gap (see :class:`UseGaps`): between the linear growth of
+#: features sharper than the gap and the quadratic growth of interpolating smooth data.
+GAP_EXPONENT = 1.5
+#: The fold that holds out the lowest lights (extrapolation below the measured lights).
+LOWEST = "the lowest lights"
+
+Fold = tuple[str, NDArray[np.int64], NDArray[np.int64]]
+
+
+@dataclass(frozen=True)
+class RungScore:
+    """One candidate's held-out score.
+
+    Attributes
+    ----------
+    name : str, a rung, or ``mixture`` (of :attr:`RungChoice.members`)
+    psnr : float, dB, of the 8-bit images over every fold's test lights (-inf: cannot apply)
+    seconds : float, fitting and predicting in every fold
+    note : str, why it cannot apply
+    """
+
+    name: str
+    psnr: float
+    seconds: float
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class RungChoice:
+    """The chosen rung (or mixture), every score, and the mixture's make-up.
+
+    Attributes
+    ----------
+    name : str, the winner
+    scores : tuple of RungScore, best first
+    folds : tuple of str, the folds' names
+    members : tuple of str, the mixture's rungs (empty when it was not formed)
+    weights : ndarray (M, P) float32 or None, the mixture's per-pixel weights from every fold
+    predictors : dict, the winner's rungs fitted on every light (by name)
+    """
+
+    name: str
+    scores: tuple[RungScore, ...]
+    folds: tuple[str, ...]
+    members: tuple[str, ...] = ()
+    weights: NDArray[np.float32] | None = None
+    predictors: dict[str, LightPredictor] = default(default_factory=dict, compare=False)
+
+    def predictor(self, whole: ReflectanceField, *, progress: bool = False) -> LightPredictor:
+        """The winner fitted on every light of ``whole`` (the field it was chosen on)."""
+        names = self.members if self.name == "mixture" else (self.name,)
+        rungs = [self.predictors.get(n) or make_predictor(whole, n, progress=progress)
+                 for n in names]  # fmt: skip
+        if self.name != "mixture":
+            return rungs[0]
+        assert self.weights is not None
+        return MixturePredictor(whole, rungs, self.weights)
+
+    def describe(self) -> str:
+        """The winner in words (a mixture names its members)."""
+        if self.name != "mixture":
+            return self.name
+        return f"a per-pixel mixture of {', '.join(self.members)}"
+
+
+def light_folds(field: ReflectanceField, queries: NDArray[np.floating] | None = None) -> list[Fold]:
+    """The (name, fit, test) folds of ``field``'s lights that look like predicting ``queries``.
+
+    Parameters
+    ----------
+    field : ReflectanceField
+    queries : ndarray (Q, 3), optional, the lights to be predicted (rig frame); when one lies
+        outside the measured lights, a fold holds out the lowest lights
+    """
+    fit, test = split_lights(field, "every-other")
+    folds: list[Fold] = [("every other light", fit, test), ("the other half", test, fit)]
+    if queries is not None and len(queries):
+        outside = MeasuredRegion.build(field.light_directions).outside(
+            np.asarray(queries, dtype=np.float64)
+        )
+        lowest = lowest_lights(field)
+        if outside.any() and len(lowest) <= field.shape[1] - 3:
+            rest = np.setdiff1d(np.arange(field.shape[1], dtype=np.int64), lowest)
+            folds.append((LOWEST, rest, lowest))
+    return folds
+
+
+def _display(values: NDArray[np.floating], scale: float) -> NDArray[np.float32]:
+    """Values as 8-bit sRGB levels, unrounded (0..255): what the PSNR compares."""
+    return linear_to_srgb(np.asarray(values, dtype=np.float32) * np.float32(scale)) * 255.0
+
+
+def _smoothed(errors: NDArray[np.float64], field: ReflectanceField) -> NDArray[np.float64]:
+    """Per-pixel errors (P,) blurred over the image, the mask's other pixels left out."""
+    assert field.image_shape is not None
+    seen = field.visibility[0].reshape(field.image_shape).astype(np.float64)
+    image = errors.reshape(field.image_shape) * seen
+    blurred = cv2.GaussianBlur(image, (0, 0), ERROR_BLUR_PX)
+    coverage = cv2.GaussianBlur(seen, (0, 0), ERROR_BLUR_PX)
+    mean = float(errors[seen.ravel() > 0].mean()) if seen.any() else 0.0
+    return np.where(coverage > 1e-6, blurred / np.maximum(coverage, 1e-6), mean).ravel()
+
+
+def _weights(errors: Sequence[NDArray[np.float64]]) -> NDArray[np.float32]:
+    """Per-pixel weights (M, P) inversely proportional to each member's error there."""
+    inverse = np.stack([1.0 / (e + 1e-3) for e in errors])
+    return (inverse / inverse.sum(axis=0, keepdims=True)).astype(np.float32)
+
+
+def choose_light_rung(
+    field: ReflectanceField,
+    queries: NDArray[np.floating] | None = None,
+    *,
+    fast: bool = False,
+    candidates: Sequence[str] | None = None,
+    mix: bool = True,
+    progress: bool = False,
+) -> RungChoice:
+    """Choose the rung (or the per-pixel mixture) that predicts ``field``'s lights best.
+
+    Parameters
+    ----------
+    field : ReflectanceField (camera 0 is scored: a field of pixels' one view)
+    queries : ndarray (Q, 3), optional, the lights to predict (rig frame; see
+        :func:`light_folds` and :func:`use_errors`)
+    fast : bool, leave out the candidates that train a network
+    candidates : names, optional (default :data:`LIGHT_CANDIDATES`, then
+        :data:`SLOW_CANDIDATES` unless ``fast``)
+    mix : bool, also try the per-pixel mixture (fields of pixels)
+    progress : bool, a bar over the folds and candidates
+
+    Raises
+    ------
+    InputError
+        A field too small to split, or no candidate that applies.
+    """
+    names = list(candidates or (*LIGHT_CANDIDATES, *(() if fast else SLOW_CANDIDATES)))
+    folds = light_folds(field, queries)
+    gaps = UseGaps.of(field, folds, queries)
+    seen = field.visibility[0]
+    rti = field.provenance.get("source") == "rti"
+    scale = 1.0 if rti else display_scale(field.camera_slab(0)[:, seen])
+    measured = _display(field.camera_slab(0)[:, seen], scale)
+    truths = [_display(field.camera_slab(0)[test][:, seen], scale) for _, _, test in folds]
+    keep = mix and field.image_shape is not None
+    held = sum(len(t) for t in truths) + len(measured)
+    keep = keep and held * int(seen.sum()) * 12 * len(names) <= MIXTURE_BYTES
+    trials: dict[str, _Trial] = {}
+    seconds = dict.fromkeys(names, 0.0)
+    notes: dict[str, str] = {}
+    bar = tqdm(total=len(names) * (len(folds) + 1), desc="choosing", unit="fit",
+               disable=not progress)  # fmt: skip
+    try:
+        for name in names:
+            start = time.perf_counter()
+            try:
+                trials[name] = _trial(field, name, folds, measured, truths, scale, keep, bar)
+            except InputError as error:  # a basis with more terms than a fold's lights
+                notes[name] = str(error)
+            seconds[name] = time.perf_counter() - start
+    finally:
+        bar.close()
+    if not trials:
+        raise InputError(f"{field.path}: no method applies ({'; '.join(notes.values())})")
+    use = {name: gaps.use_errors(trial.inside, trial.folds) for name, trial in trials.items()}
+    scores = [RungScore(n, _psnr(use[n]) if n in use else -math.inf, seconds[n], notes.get(n, ""))
+              for n in names]  # fmt: skip
+    scores.sort(key=lambda s: -s.psnr)
+    fold_names = tuple(name for name, _, _ in folds)
+    members = tuple(s.name for s in scores if s.name in trials)[:MIXED]
+    found = {n: trials[n].predictor for n in members[:1]}
+    if not keep or len(members) < 2:
+        return RungChoice(scores[0].name, tuple(scores), fold_names, predictors=found)
+    mixture = _mixture_use_errors(
+        field, [trials[m] for m in members], gaps, measured, truths, scale
+    )
+    weights = _weights([_smoothed(_full(field, use[m]), field) for m in members])
+    mixed = RungScore("mixture", _psnr(mixture), sum(seconds[m] for m in members))
+    ranked = tuple(sorted([*scores, mixed], key=lambda s: -s.psnr))
+    name = "mixture" if mixed.psnr > scores[0].psnr + MIXTURE_MARGIN_DB else scores[0].name
+    found = {m: trials[m].predictor for m in (members if name == "mixture" else members[:1])}
+    return RungChoice(name, ranked, fold_names, members, weights, predictors=found)
+
+
+@dataclass
+class _Trial:
+    """One candidate on the field: fitted on every light, and on each fold."""
+
+    predictor: LightPredictor
+    inside: NDArray[np.float64]  # (N,) per-pixel MSE at the measured lights, fit on all
+    folds: list[NDArray[np.float64]]  # per fold (N,) per-pixel held-out MSE
+    at_measured: NDArray[np.float32] | None  # (T, N, 3) linear, fit on all (for the mixture)
+    held_out: list[NDArray[np.float32]]  # per fold (Q_f, N, 3) linear (for the mixture)
+
+
+def _trial(
+    field: ReflectanceField,
+    name: str,
+    folds: list[Fold],
+    measured: NDArray[np.float32],
+    truths: list[NDArray[np.float32]],
+    scale: float,
+    keep: bool,
+    bar: tqdm[Any],
+) -> _Trial:
+    seen = field.visibility[0]
+
+    def mse(predicted: NDArray[np.float32], truth: NDArray[np.float32]) -> NDArray[np.float64]:
+        difference = _display(predicted, scale) - truth
+        return np.mean(difference.astype(np.float64) ** 2, axis=(0, 2))
+
+    predictor = make_predictor(field, name)
+    at_measured = predictor.predict(0, field.light_directions)[:, seen]
+    bar.update()
+    errors, held_out = [], []
+    for (_, fit, test), truth in zip(folds, truths, strict=True):
+        predicted = make_predictor(field.subset(lights=fit), name).predict(
+            0, field.light_directions[test]
+        )[:, seen]
+        errors.append(mse(predicted, truth))
+        held_out.append(predicted if keep else predicted[:0])
+        bar.update()
+    return _Trial(predictor, mse(at_measured, measured), errors,
+                  at_measured if keep else None, held_out)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class UseGaps:
+    """How far the use's lights are from the measured ones, against the folds' held-out lights.
+
+    A held-out light is as far from the fit lights as the dome's spacing; a light to predict
+    usually lies between measured lights, closer. Interpolation error grows with that gap,
+    between linearly (features sharper than the gap) and quadratically (smooth data) by the
+    usual bounds: the per-pixel error of the use is taken as the error at the measured lights
+    (0 for a rung that reproduces them, the fit's residual for a basis) plus the held-out
+    excess scaled by ``ratio ** GAP_EXPONENT``, ``ratio`` the mean gap of the use over the
+    folds'. Requests outside the measured lights are scored by the lowest-lights fold as it is,
+    weighed by their share.
+
+    Attributes
+    ----------
+    ratio : float, the use's mean gap over the interpolation folds' (1 without requests)
+    outside : float, share of the requests outside the measured lights
+    """
+
+    ratio: float
+    outside: float
+
+    @classmethod
+    def of(
+        cls, field: ReflectanceField, folds: list[Fold], queries: NDArray[np.floating] | None
+    ) -> UseGaps:
+        """The gaps of predicting ``queries`` from ``field``, against ``folds``'."""
+        if queries is None or not len(queries):
+            return cls(1.0, 0.0)
+        lights = field.light_directions
+        q = np.asarray(queries, dtype=np.float64)
+        outside = MeasuredRegion.build(lights).outside(q)
+        held = [np.degrees(angle_between(lights[test][:, None], lights[fit][None]).min(axis=1))
+                for name, fit, test in folds if name != LOWEST]  # fmt: skip
+        fold_gap = float(np.mean(np.concatenate(held)))
+        inside = q[~outside]
+        if not len(inside):
+            return cls(1.0, 1.0)
+        use_gap = float(
+            np.mean(np.degrees(angle_between(inside[:, None], lights[None]).min(axis=1)))
+        )
+        has_lowest = any(name == LOWEST for name, _, _ in folds)
+        return cls(use_gap / fold_gap if fold_gap > 0 else 1.0,
+                   float(outside.mean()) if has_lowest else 0.0)  # fmt: skip
+
+    def use_errors(
+        self, inside: NDArray[np.float64], folds: list[NDArray[np.float64]]
+    ) -> NDArray[np.float64]:
+        """Per-pixel MSE (N,) expected in the use, from the measured and the folds' errors."""
+        between = np.mean(folds[:2], axis=0)
+        expected = inside + np.maximum(between - inside, 0.0) * self.ratio**GAP_EXPONENT
+        if len(folds) > 2:
+            return (1.0 - self.outside) * expected + self.outside * folds[2]
+        return expected
+
+
+def _full(field: ReflectanceField, values: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Values of the object's pixels (N,) spread over every pixel (P,), 0 elsewhere."""
+    out = np.zeros(field.shape[2])
+    out[field.visibility[0]] = values
+    return out
+
+
+def _mixture_use_errors(
+    field: ReflectanceField,
+    trials: list[_Trial],
+    gaps: UseGaps,
+    measured: NDArray[np.float32],
+    truths: list[NDArray[np.float32]],
+    scale: float,
+) -> NDArray[np.float64]:
+    """The mixture's per-pixel use errors (N,), each fold mixed by the other folds' errors."""
+    seen = field.visibility[0]
+
+    def mixed(values: list[NDArray[np.float32]], weights: NDArray[np.float32]) -> NDArray[Any]:
+        out = np.zeros_like(values[0])
+        for weight, value in zip(weights, values, strict=True):
+            out += weight[None, :, None] * value
+        return out
+
+    def mse(predicted: NDArray[np.float32], truth: NDArray[np.float32]) -> NDArray[np.float64]:
+        return np.mean((_display(predicted, scale) - truth).astype(np.float64) ** 2, axis=(0, 2))
+
+    def weights_without(fold: int) -> NDArray[np.float32]:
+        errors = [np.mean([e for g, e in enumerate(t.folds) if g != fold], axis=0) for t in trials]
+        return _weights([_smoothed(_full(field, e), field)[seen] for e in errors])
+
+    folds = [mse(mixed([t.held_out[f] for t in trials], weights_without(f)), truths[f])
+             for f in range(len(truths))]  # fmt: skip
+    overall = _weights([_smoothed(_full(field, np.mean(t.folds, axis=0)), field)[seen]
+                        for t in trials])  # fmt: skip
+    at_measured = [t.at_measured for t in trials]
+    assert all(a is not None for a in at_measured)
+    inside = mse(mixed([a for a in at_measured if a is not None], overall), measured)
+    return gaps.use_errors(inside, folds)
+
+
+def _psnr(errors: NDArray[np.float64]) -> float:
+    """PSNR (dB) of per-pixel mean squared errors of 8-bit levels."""
+    mse = float(np.mean(errors)) if errors.size else math.nan
+    if not math.isfinite(mse):
+        return -math.inf
+    return math.inf if mse <= 0 else 10.0 * math.log10(255.0**2 / mse)

@@ -1,0 +1,86 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.directions import hemisphere_layout
+from core.field_store import ReflectanceField
+from processing.rti import import_rti, write_rti_capture
+from render.light_prediction import MixturePredictor
+from render.rung_choice import LOWEST, UseGaps, choose_light_rung, light_folds
+
+LIGHTS = hemisphere_layout(36, "fibonacci")
+
+
+def _two_materials(folder: Path) -> ReflectanceField:
+    """A capture whose left half is matte and right half shiny (a Phong lobe toward the camera)."""
+    cosine = np.clip(LIGHTS[:, 2], 0.0, None)
+    half = (LIGHTS + [0.0, 0.0, 1.0]) / np.linalg.norm(LIGHTS + [0.0, 0.0, 1.0], axis=1)[:, None]
+    lobe = 0.5 * half[:, 2] ** 60 * cosine
+    images = np.zeros((len(LIGHTS), 8, 12, 3))
+    images[:, :, :6] = (0.5 / np.pi * cosine)[:, None, None, None]
+    images[:, :, 6:] = (0.1 / np.pi * cosine + lobe)[:, None, None, None]
+    lp = write_rti_capture(folder / "capture", "dome", images, LIGHTS, scale=1.0)
+    return import_rti(lp, folder / "field.zarr", progress=False)
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory: pytest.TempPathFactory) -> ReflectanceField:
+    return _two_materials(tmp_path_factory.mktemp("two"))
+
+
+def test_the_folds_hold_out_every_light_once_and_the_lowest_ones_for_extrapolation(
+    capture: ReflectanceField,
+) -> None:
+    folds = light_folds(capture)
+    assert [name for name, _, _ in folds] == ["every other light", "the other half"]
+    tested = np.concatenate([test for _, _, test in folds])
+    assert sorted(tested.tolist()) == list(range(capture.shape[1]))
+    for _, fit, test in folds:
+        assert np.intersect1d(fit, test).size == 0
+    below = np.array([[1.0, 0.0, 0.02]]) / np.linalg.norm([1.0, 0.0, 0.02])
+    assert [name for name, _, _ in light_folds(capture, below)][-1] == LOWEST
+
+
+def test_the_use_gap_scales_only_the_excess_over_the_error_at_the_measured_lights(
+    capture: ReflectanceField,
+) -> None:
+    folds = light_folds(capture)
+    assert UseGaps.of(capture, folds, None) == UseGaps(1.0, 0.0)
+    between = UseGaps.of(capture, folds, capture.light_directions[:5] * 0.999 + 0.001)
+    assert 0.0 <= between.ratio < 0.2 and between.outside == 0.0
+    inside, held = np.array([1.0, 4.0]), [np.array([9.0, 4.0]), np.array([9.0, 2.0])]
+    expected = UseGaps(0.5, 0.0).use_errors(inside, held)
+    np.testing.assert_allclose(expected, [1.0 + 8.0 * 0.5**1.5, 4.0])
+
+
+def test_two_materials_are_predicted_by_a_rung_or_a_mixture_that_beats_each_alone(
+    capture: ReflectanceField,
+) -> None:
+    queries = hemisphere_layout(10, "grid")
+    choice = choose_light_rung(capture, queries, candidates=["barycentric", "rbf", "hsh3"])
+    scores = {s.name: s.psnr for s in choice.scores}
+    assert set(scores) == {"barycentric", "rbf", "hsh3", "mixture"}
+    assert choice.scores[0].psnr == max(scores.values())
+    assert choice.members == tuple(s.name for s in choice.scores if s.name != "mixture")[:3]
+    assert choice.weights is not None
+    np.testing.assert_allclose(choice.weights.sum(axis=0), 1.0, rtol=1e-5)
+    predictor = choice.predictor(capture)
+    predicted = predictor.predict(0, queries)
+    assert predicted.shape == (10, capture.shape[2], 3)
+    if choice.name == "mixture":
+        assert isinstance(predictor, MixturePredictor)
+        assert scores["mixture"] > max(v for k, v in scores.items() if k != "mixture")
+
+
+def test_a_basis_that_cannot_apply_is_said_and_skipped(tmp_path: Path) -> None:
+    directions = hemisphere_layout(12, "fibonacci")
+    images = np.broadcast_to((0.3 * directions[:, 2])[:, None, None, None], (12, 4, 4, 3))
+    lp = write_rti_capture(tmp_path / "c", "dome", images, directions, scale=1.0)
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    choice = choose_light_rung(field, candidates=["barycentric", "hsh3"], mix=False)
+    hsh = next(s for s in choice.scores if s.name == "hsh3")
+    assert hsh.psnr == -np.inf and "terms" in hsh.note
+    assert choice.name == "barycentric"
