@@ -17,7 +17,8 @@ LIGHTS = hemisphere_layout(36, "fibonacci")
 def _two_materials(folder: Path) -> ReflectanceField:
     """A capture whose left half is matte and right half shiny (a Phong lobe toward the camera)."""
     cosine = np.clip(LIGHTS[:, 2], 0.0, None)
-    half = (LIGHTS + [0.0, 0.0, 1.0]) / np.linalg.norm(LIGHTS + [0.0, 0.0, 1.0], axis=1)[:, None]
+    toward = LIGHTS + np.array([0.0, 0.0, 1.0])
+    half = toward / np.linalg.norm(toward, axis=1)[:, None]
     lobe = 0.5 * half[:, 2] ** 60 * cosine
     images = np.zeros((len(LIGHTS), 8, 12, 3))
     images[:, :, :6] = (0.5 / np.pi * cosine)[:, None, None, None]
