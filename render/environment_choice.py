@@ -5,14 +5,16 @@ matters is not one light's but the panorama's sum's: errors of neighbouring ligh
 cancel, and the light-stage sum, whose single-light prediction is the nearest measured image,
 does much better under a broad sky than under a sun. The choice therefore looks like the use:
 
-1. the field's lights are split (every other light: gaps as wide as the ones to fill; plus the
+1. the field's lights are split (every other light, and the
    lowest lights held out when part of the panorama's light lies below the measured lights, so
    extrapolation is tested where the use extrapolates);
 2. the panorama (as the object sees it: below the horizon blocked when the capture says so)
    is gathered into the spherical Voronoi cells of the held-out lights, E_j;
 3. the truth is the sum of the held-out images weighted by E_j, and each candidate predicts
    every held-out light from the fit lights alone and is weighted the same way; its error is
-   the relative RMSE in linear light over the object's pixels, the splits weighted by the share
+   the relative RMSE in linear light over the object's pixels, its excess over the error of
+   the same sum at the measured lights scaled to the panorama's gaps as
+   :class:`render.rung_choice.UseGaps` scales it, the splits weighted by the share
    of the panorama's light they stand for (the lowest lights: the share outside the measured
    lights; every other light: the rest).
 
@@ -34,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm import tqdm
 
+from core.directions import angle_between
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import grid_lights
@@ -46,6 +49,7 @@ from render.light_prediction import make_predictor
 from render.predictor_relight import PredictorRelightSettings
 from render.relight_mode import MOST_ACCURATE_MODELS, RelightMode
 from render.relighter import RelightSettings
+from render.rung_choice import GAP_EXPONENT
 
 __all__ = [
     "ENVIRONMENT_CANDIDATES",
@@ -150,6 +154,37 @@ def _weighted_truth(
     return cells.rgb, np.einsum("qc,qpc->pc", cells.rgb, slab.astype(np.float64))
 
 
+def _summed_error(
+    field: ReflectanceField,
+    panorama: Panorama,
+    name: str,
+    fit: NDArray[np.int64],
+    test: NDArray[np.int64],
+) -> float:
+    """Relative RMSE of ``name`` fitted on ``fit``, its ``test`` predictions summed alike."""
+    weights, truth = _weighted_truth(field, panorama, test)
+    part = field if len(fit) == field.shape[1] else field.subset(lights=fit)
+    predictor = make_predictor(part, "nearest" if name == LIGHT_STAGE else name)
+    predicted = predictor.predict(0, field.light_directions[test])
+    estimate = np.einsum("qc,qpc->pc", weights, predicted.astype(np.float64))
+    seen = field.visibility[0]
+    return relative_rmse(estimate[None, seen], truth[None, seen])
+
+
+def _gap_ratio(field: ReflectanceField, panorama: Panorama, split: Split) -> float:
+    """The panorama's light's mean gap to the measured lights over the split's held-out gap."""
+    _, fit, test, _ = split
+    lights = field.light_directions
+    held = np.degrees(angle_between(lights[test][:, None], lights[fit][None]).min(axis=1))
+    grid = grid_lights(panorama.rgb, OUTSIDE_GRID).nonempty()
+    inside = ~MeasuredRegion.build(lights).outside(grid.directions)
+    energy = grid.rgb.sum(axis=1) * inside
+    if energy.sum() <= 0 or held.mean() <= 0:
+        return 1.0
+    gaps = np.degrees(angle_between(grid.directions[:, None], lights[None]).min(axis=1))
+    return float(np.sum(energy * gaps) / energy.sum() / held.mean())
+
+
 def choose_environment_mode(
     field: ReflectanceField,
     panorama: Panorama,
@@ -177,33 +212,36 @@ def choose_environment_mode(
     if field.image_shape is None:
         raise InputError(f"{field.path}: the environment choice is made for fields of pixels")
     names = list(candidates or (*ENVIRONMENT_CANDIDATES, *(() if fast else SLOW_CANDIDATES)))
-    seen = field.visibility[0]
     splits = held_out_splits(field, panorama)
     errors: dict[str, list[float]] = {name: [] for name in names}
     seconds = dict.fromkeys(names, 0.0)
     notes: dict[str, str] = {}
     bar = tqdm(total=len(names) * len(splits), desc="choosing", unit="method",
                disable=not progress)  # fmt: skip
+    everything = np.arange(field.shape[1], dtype=np.int64)
+    ratio = _gap_ratio(field, panorama, splits[0])
     try:
-        for _, fit, test, weight in splits:
-            weights, truth = _weighted_truth(field, panorama, test)
-            part = field.subset(lights=fit)
+        for index, (_, fit, test, weight) in enumerate(splits):
             for name in names:
                 start = time.perf_counter()
-                try:
-                    predictor = make_predictor(part, "nearest" if name == LIGHT_STAGE else name)
-                    predicted = predictor.predict(0, field.light_directions[test])
-                except InputError as error:  # a basis with more terms than the split's lights
-                    errors[name].append(math.inf * weight)
-                    notes[name] = str(error)
-                else:
-                    estimate = np.einsum("qc,qpc->pc", weights, predicted.astype(np.float64))
-                    rmse = relative_rmse(estimate[None, seen], truth[None, seen])
-                    errors[name].append(weight * rmse)
+                if name not in notes:
+                    try:
+                        error = _summed_error(field, panorama, name, fit, test)
+                        if index == 0:
+                            # The use's gaps are narrower than a held-out light's: the excess
+                            # over the error at the measured lights shrinks (rung_choice).
+                            inside = _summed_error(field, panorama, name, everything, everything)
+                            excess = max(error**2 - inside**2, 0.0) * ratio**GAP_EXPONENT
+                            error = math.sqrt(inside**2 + excess)
+                        errors[name].append(weight * error)
+                    except InputError as problem:  # a basis with more terms than the lights
+                        notes[name] = str(problem)
                 seconds[name] += time.perf_counter() - start
                 bar.update()
     finally:
         bar.close()
+    for name in notes:
+        errors[name] = [math.inf]
     scores = tuple(
         sorted(
             (
