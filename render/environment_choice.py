@@ -171,14 +171,18 @@ def _summed_error(
     return relative_rmse(estimate[None, seen], truth[None, seen])
 
 
-def _gap_ratio(field: ReflectanceField, panorama: Panorama, split: Split) -> float:
-    """The panorama's light's mean gap to the measured lights over the split's held-out gap."""
+def _gap_ratio(field: ReflectanceField, panorama: Panorama, split: Split, *, below: bool) -> float:
+    """The panorama's light's mean gap to the measured lights over the split's held-out gap.
+
+    ``below``: of the light outside the measured lights (the lowest lights' split), else of
+    the light inside them.
+    """
     _, fit, test, _ = split
     lights = field.light_directions
     held = np.degrees(angle_between(lights[test][:, None], lights[fit][None]).min(axis=1))
     grid = grid_lights(panorama.rgb, OUTSIDE_GRID).nonempty()
-    inside = ~MeasuredRegion.build(lights).outside(grid.directions)
-    energy = grid.rgb.sum(axis=1) * inside
+    outside = MeasuredRegion.build(lights).outside(grid.directions)
+    energy = grid.rgb.sum(axis=1) * (outside if below else ~outside)
     if energy.sum() <= 0 or held.mean() <= 0:
         return 1.0
     gaps = np.degrees(angle_between(grid.directions[:, None], lights[None]).min(axis=1))
@@ -219,21 +223,19 @@ def choose_environment_mode(
     bar = tqdm(total=len(names) * len(splits), desc="choosing", unit="method",
                disable=not progress)  # fmt: skip
     everything = np.arange(field.shape[1], dtype=np.int64)
-    ratio = _gap_ratio(field, panorama, splits[0])
+    ratios = [_gap_ratio(field, panorama, split, below=i > 0) for i, split in enumerate(splits)]
     try:
-        for index, (_, fit, test, weight) in enumerate(splits):
+        for ratio, (_, fit, test, weight) in zip(ratios, splits, strict=True):
             for name in names:
                 start = time.perf_counter()
                 if name not in notes:
                     try:
                         error = _summed_error(field, panorama, name, fit, test)
-                        if index == 0:
-                            # The use's gaps are narrower than a held-out light's: the excess
-                            # over the error at the measured lights shrinks (rung_choice).
-                            inside = _summed_error(field, panorama, name, everything, everything)
-                            excess = max(error**2 - inside**2, 0.0) * ratio**GAP_EXPONENT
-                            error = math.sqrt(inside**2 + excess)
-                        errors[name].append(weight * error)
+                        # The use's gaps are narrower than a held-out light's: the excess over
+                        # the error at the measured lights shrinks (rung_choice.UseGaps).
+                        inside = _summed_error(field, panorama, name, everything, everything)
+                        excess = max(error**2 - inside**2, 0.0) * ratio**GAP_EXPONENT
+                        errors[name].append(weight * math.sqrt(inside**2 + excess))
                     except InputError as problem:  # a basis with more terms than the lights
                         notes[name] = str(problem)
                 seconds[name] += time.perf_counter() - start

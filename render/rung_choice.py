@@ -313,17 +313,19 @@ class UseGaps:
     usual bounds: the per-pixel error of the use is taken as the error at the measured lights
     (0 for a rung that reproduces them, the fit's residual for a basis) plus the held-out
     excess scaled by ``ratio ** GAP_EXPONENT``, ``ratio`` the mean gap of the use over the
-    folds'. Requests outside the measured lights are scored by the lowest-lights fold as it is,
-    weighed by their share.
+    folds'. Requests outside the measured lights are scored by the lowest-lights fold, scaled
+    alike by their gap over that fold's, and weighed by their share.
 
     Attributes
     ----------
     ratio : float, the use's mean gap over the interpolation folds' (1 without requests)
     outside : float, share of the requests outside the measured lights
+    below : float, the requests outside: their mean gap over the lowest lights' fold's
     """
 
     ratio: float
     outside: float
+    below: float = 1.0
 
     @classmethod
     def of(
@@ -339,14 +341,17 @@ class UseGaps:
                 for name, fit, test in folds if name != LOWEST]  # fmt: skip
         fold_gap = float(np.mean(np.concatenate(held)))
         inside = q[~outside]
-        if not len(inside):
-            return cls(1.0, 1.0)
-        use_gap = float(
-            np.mean(np.degrees(angle_between(inside[:, None], lights[None]).min(axis=1)))
-        )
-        has_lowest = any(name == LOWEST for name, _, _ in folds)
-        return cls(use_gap / fold_gap if fold_gap > 0 else 1.0,
-                   float(outside.mean()) if has_lowest else 0.0)  # fmt: skip
+        ratio = 1.0
+        if len(inside) and fold_gap > 0:
+            nearest = angle_between(inside[:, None], lights[None]).min(axis=1)
+            ratio = float(np.mean(np.degrees(nearest))) / fold_gap
+        lowest = [(fit, test) for name, fit, test in folds if name == LOWEST]
+        if not lowest:
+            return cls(ratio, 0.0)
+        fit, test = lowest[0]
+        low_gap = np.degrees(angle_between(lights[test][:, None], lights[fit][None]).min(axis=1))
+        far = np.degrees(angle_between(q[outside][:, None], lights[None]).min(axis=1))
+        return cls(ratio, float(outside.mean()), float(far.mean() / max(low_gap.mean(), 1e-9)))
 
     def use_errors(
         self, inside: NDArray[np.float64], folds: list[NDArray[np.float64]]
@@ -355,7 +360,8 @@ class UseGaps:
         between = np.mean(folds[:2], axis=0)
         expected = inside + np.maximum(between - inside, 0.0) * self.ratio**GAP_EXPONENT
         if len(folds) > 2:
-            return (1.0 - self.outside) * expected + self.outside * folds[2]
+            below = inside + np.maximum(folds[2] - inside, 0.0) * self.below**GAP_EXPONENT
+            return (1.0 - self.outside) * expected + self.outside * below
         return expected
 
 

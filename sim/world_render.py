@@ -134,7 +134,7 @@ class WorldRenderer:
         _check_settings(spp, max_depth)
         self.mi = mi = load_mitsuba(variant)
         self.camera = camera
-        shape = world.mitsuba_mesh(mi)
+        shapes = world.mitsuba_shapes(mi)
         self._light_scene = mi.load_dict({
             "type": "scene",
             "integrator": {"type": "path", "max_depth": max_depth, "hide_emitters": True},
@@ -144,14 +144,14 @@ class WorldRenderer:
                 "to_world": _light_to_world(mi, np.array([0.0, 0.0, 1.0])),
                 "irradiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
             },
-            "object": shape,
+            **shapes,
         })  # fmt: skip
         self._geometry_scene = mi.load_dict({
             "type": "scene",
             "integrator": {"type": "aov", "aovs": "p:position,dd.y:depth"},
             "sensor": perspective_sensor(mi, camera, {"type": "stratified", "sample_count": 1,
                                            "jitter": False}),
-            "object": shape,
+            **shapes,
         })  # fmt: skip
         self._light_params = mi.traverse(self._light_scene)
         self._geometry_params = mi.traverse(self._geometry_scene)
@@ -235,6 +235,6 @@ def render_environment_image(
             "bitmap": mi.Bitmap(envmap_texels(rgb, upsample)),
             "to_world": mi.ScalarTransform4f(to_rig.tolist()),
         },
-        "object": world.mitsuba_mesh(mi),
+        **world.mitsuba_shapes(mi),
     })  # fmt: skip
     return _image(mi, scene, seed)

@@ -16,6 +16,10 @@ Each has unit vertex normals (smooth shading) and texture coordinates; with thei
     base ``base`` thick. u, v span the top; sides and bottom are flat (their uv are 0).
 ``sphere``
     A latitude-longitude sphere of ``radius``; u = azimuth / 2 pi, v = inclination / pi.
+``cylinder``
+    An upright closed cylinder of ``radius`` and ``height`` about +z, centred on the origin, with
+    flat caps whose rims are sharp (the caps have vertices of their own). u around the axis, v
+    along each part's profile.
 """
 
 from __future__ import annotations
@@ -28,7 +32,15 @@ from numpy.typing import NDArray
 from core.errors import InputError
 from sim.world_mesh import TriangleMesh, oriented_faces, unit_normals, vertex_normals
 
-__all__ = ["bowl_mesh", "relief_heights", "relief_mesh", "sphere_mesh", "torus_knot_mesh"]
+__all__ = [
+    "bowl_mesh",
+    "cylinder_mesh",
+    "join_meshes",
+    "relief_heights",
+    "relief_mesh",
+    "sphere_mesh",
+    "torus_knot_mesh",
+]
 
 
 def _grid_faces(rows: int, cols: int) -> NDArray[np.int64]:
@@ -165,6 +177,50 @@ def sphere_mesh(*, radius: float = 0.9, rings: int = 64, segments: int = 128) ->
     profile = np.stack([radius * np.sin(theta), radius * np.cos(theta)], -1)
     normals = np.stack([np.sin(theta), np.cos(theta)], -1)
     return _revolve(profile, normals, segments)
+
+
+def join_meshes(parts: list[TriangleMesh]) -> TriangleMesh:
+    """One mesh of several (vertices appended, faces re-indexed).
+
+    Texture coordinates are kept when every part has them; a part without uv gets zeros when
+    another has them, and the result has none when no part has them.
+    """
+    if len(parts) == 1:
+        return parts[0]
+    offsets = np.cumsum([0] + [len(part.vertices) for part in parts[:-1]])
+    uv = None
+    if any(part.uv is not None for part in parts):
+        uv = np.concatenate([
+            np.zeros((len(part.vertices), 2)) if part.uv is None else part.uv for part in parts
+        ])  # fmt: skip
+    return TriangleMesh(
+        np.concatenate([part.vertices for part in parts]),
+        np.concatenate([part.faces + offset for part, offset in zip(parts, offsets, strict=True)]),
+        np.concatenate([part.normals for part in parts]),
+        uv,
+    )
+
+
+def cylinder_mesh(
+    *, radius: float = 0.3, height: float = 0.8, rings: int = 8, segments: int = 96
+) -> TriangleMesh:
+    """An upright closed cylinder about +z, centred on the origin (module docstring).
+
+    The side has ``rings`` rows of quads along its height; each cap is a fan of ``rings``
+    concentric rows, so the triangles stay near equal in size for the surface samples.
+    """
+    top, steps = 0.5 * height, np.arange(rings + 1) / rings
+    side = np.stack([np.full(rings + 1, radius), top * (2.0 * steps - 1.0)], -1)
+    side_normals = np.tile([1.0, 0.0], (rings + 1, 1))
+    # Caps run from the rim inward: the pole collapses to a point (degenerate faces dropped).
+    cap_r = radius * (1.0 - steps)
+    upper = np.stack([cap_r, np.full(rings + 1, top)], -1)
+    lower = np.stack([cap_r[::-1], np.full(rings + 1, -top)], -1)
+    return join_meshes([
+        _revolve(side, side_normals, segments),
+        _revolve(upper, np.tile([0.0, 1.0], (rings + 1, 1)), segments),
+        _revolve(lower, np.tile([0.0, -1.0], (rings + 1, 1)), segments),
+    ])  # fmt: skip
 
 
 def _inside(margin: NDArray[np.float64], wall: float = 0.08) -> NDArray[np.float64]:

@@ -68,10 +68,10 @@ def sphere(tmp_path_factory: pytest.TempPathFactory, mi: Any) -> World:
 # --- world files -------------------------------------------------------------------------------
 
 
-def test_the_bundled_worlds_are_the_six_asked_for() -> None:
+def test_the_bundled_worlds_are_the_six_asked_for_and_three_scenes_on_a_base() -> None:
     assert set(WORLDS) == {
         "principled-knot", "plastic-bowl", "brushed-knot", "copper-bowl", "clearcoat-relief",
-        "matte-relief",
+        "matte-relief", "matte-still-life", "plastic-gold", "glazed-bowl",
     }  # fmt: skip
 
 
@@ -80,7 +80,9 @@ def test_every_bundled_world_loads_and_renders(mi: Any, name: str) -> None:
     world = load_world(name)
     assert world.name == name and world.source == WORLDS_FOLDER / f"{name}.toml"
     assert world.description and len(world.digest) == 64
-    assert world.mesh.bounding_radius <= 1.0
+    # Every object fits the unit sphere; a base plate may reach beyond it.
+    assert all(p.mesh.bounding_radius <= 1.0 for p in world.parts if p.label != "base")
+    assert world.parts[0].mesh is world.mesh or len(world.parts) > 1
     camera = PinholeCamera(30.0, 55.0, 4.0, 40.0, 24, 24)
     sky = np.ones((8, 16, 3), dtype=np.float32)
     rgb, alpha = render_world_environment(world, sky, camera, spp=4, max_depth=3)
@@ -95,6 +97,45 @@ def test_a_world_file_by_path_equals_the_bundled_world(mi: Any, tmp_path: Path) 
     bundled = load_world("copper-bowl")
     assert copy.digest == bundled.digest and copy.material == bundled.material
     np.testing.assert_array_equal(copy.mesh.vertices, bundled.mesh.vertices)
+
+
+SCENE = (
+    SPHERE.replace("radius = 1.0", "radius = 0.3\nposition = [0.0, 0.0, 0.1]")
+    + """
+[[objects]]
+shape = { type = "cylinder", radius = 0.2, height = 0.4, position = [0.5, 0.0, 0.0] }
+material = { type = "diffuse", reflectance = [0.2, 0.2, 0.2] }
+
+[base]
+size = 3.5
+"""
+)
+
+
+def test_a_world_of_several_objects_stands_on_its_base(mi: Any, tmp_path: Path) -> None:
+    world = load_world(write_world(tmp_path, SCENE))
+    assert [p.label for p in world.parts] == ["object", "object-1", "base"]
+    # The base's top is the objects' lowest point (the sphere's bottom, 0.1 - 0.3).
+    assert world.base_z == pytest.approx(-0.2)
+    sphere_part, cylinder_part, base = world.parts
+    box = sphere_part.mesh.vertices.max(axis=0) + sphere_part.mesh.vertices.min(axis=0)
+    np.testing.assert_allclose(box / 2, [0.0, 0.0, 0.1], atol=1e-3)
+    assert cylinder_part.mesh.vertices[:, 2].min() == pytest.approx(-0.2)
+    assert np.ptp(base.mesh.vertices[:, 0]) == pytest.approx(3.5)
+    assert len(world.mesh.vertices) == sum(len(p.mesh.vertices) for p in world.parts)
+    assert set(world.mitsuba_shapes(mi)) == {"object", "object-1", "base"}
+    # Overhead under a white sky, the bare base reflects its albedo (0.5, the default grey).
+    camera = PinholeCamera(0.0, 0.0, 4.0, 32.0, 16, 16)
+    sky = np.ones((8, 16, 3), dtype=np.float32)
+    rgb, alpha = render_world_environment(world, sky, camera, spp=16, max_depth=3)
+    assert alpha.min() == pytest.approx(1.0)
+    assert rgb[0, 0].mean() == pytest.approx(0.5, rel=0.05)
+    with pytest.raises(InputError, match=r"objects\[1\].shape reaches .* unit sphere"):
+        load_world(write_world(tmp_path, SCENE.replace("[0.5, 0.0, 0.0]", "[0.95, 0.0, 0.0]")))
+    with pytest.raises(InputError, match=r"\[base\]: unknown key 'colour'"):
+        load_world(write_world(tmp_path, SCENE.replace("size = 3.5", "colour = 1")))
+    with pytest.raises(InputError, match=r"\[shape\] position: expected \[x, y, z\]"):
+        load_world(write_world(tmp_path, SCENE.replace("[0.0, 0.0, 0.1]", "[0.0, 0.1]")))
 
 
 def test_an_unknown_world_name_lists_the_bundled_ones() -> None:
