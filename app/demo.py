@@ -160,11 +160,13 @@ def _rti_demo(out: Path) -> list[str]:
     import numpy as np
 
     from core.image_io import write_srgb8
-    from processing.panorama import read_panorama
+    from processing.panorama import read_panorama, visible_environment
     from processing.rti import open_field_or_rti
+    from processing.sample_model_store import models_for_field
     from processing.sample_models import choose_model, format_loo_table, interpolation_loo
+    from render.environment_choice import choose_environment_mode
     from render.output import display_picture
-    from render.relight_mode import most_accurate_mode, open_relighter
+    from render.relight_mode import open_relighter
 
     lines = ["## Relighting a real RTI capture", ""]
     lp = rti_capture_path()
@@ -175,18 +177,22 @@ def _rti_demo(out: Path) -> list[str]:
         "",
     ]
     with open_field_or_rti(lp) as field:
-        choice = most_accurate_mode(field)
-        relighter = open_relighter(field, choice.mode, choice.models)
-        relighter.set_view(field.cameras[0])
         for name in ("courtyard", "studio"):
-            relighter.set_lighting(read_panorama(panorama_path(name)))
+            # As rig relight CAPTURE --env PANO --fast does: the rung chosen under the panorama.
+            panorama = read_panorama(panorama_path(name))
+            seen = visible_environment(panorama, field.below_horizon)
+            choice = choose_environment_mode(field, seen, fast=True)
+            relighter = open_relighter(field, choice.mode)
+            relighter.set_view(field.cameras[0])
+            relighter.set_lighting(panorama)
             image = relighter.render()
             picture = display_picture(image.rgb, image.coverage)
             target = out / "relight" / "rti" / f"{name}.png"
             write_srgb8(target, np.repeat(np.repeat(picture, 4, axis=0), 4, axis=1))
-            lines.append(f"- under {name}: [png](relight/rti/{name}.png)")
-        lines += ["", f"Relighting mode: {choice.reason}.", "", "Leave-one-light-out error:", ""]
-        lines.append(format_loo_table(choose_model(choice.models).table, extra={
+            lines.append(f"- under {name}: [png](relight/rti/{name}.png); {choice.reason}")
+        models = models_for_field(field)
+        lines += ["", "Leave-one-light-out error:", ""]
+        lines.append(format_loo_table(choose_model(models).table, extra={
             f"interpolation: {m}": interpolation_loo(field, m).relative_rmse
             for m in ("nearest", "barycentric", "paper")
         }))  # fmt: skip

@@ -71,6 +71,7 @@ ENVIRONMENT_CANDIDATES = (
     "hsh3",
     "lambert+ggx",
     "lambert+ggx+residual",
+    "light-stage+lambert+ggx",
     "adaptive",
 )
 #: Candidates that train a network (minutes): left out by ``fast``.

@@ -29,6 +29,8 @@ method                      what predicts the unmeasured light
                             share of the error): where the model explains a sample its
                             residual helps, where it does not (cast shadows, grazing light)
                             plain interpolation is kept
+``light-stage+lambert+ggx``  the model plus its residual at the nearest measured light:
+                            under an environment, the light-stage sum corrected by the model
 ``learned``,                a code per sample and one small decoder shared by the object,
 ``learned+residual``        trained on the capture (:mod:`processing.learned_rti`, the class
                             of neural RTI; about a minute of training on 2 cores), alone and
@@ -117,6 +119,7 @@ PredictorName = Literal[
     "adaptive",
     "learned",
     "learned+residual",
+    "light-stage+lambert+ggx",
 ]
 #: Every method, the baselines first.
 PREDICTORS: tuple[PredictorName, ...] = get_args(PredictorName)
@@ -366,11 +369,18 @@ class _Model:
 
 @dataclass
 class _Residual:
-    """A model plus the barycentric interpolation of its residual at the measured lights."""
+    """A model plus the interpolation of its residual at the measured lights.
+
+    ``interpolation``: barycentric (``<model>+residual``), or nearest (``light-stage+<model>``:
+    under an environment, the light-stage sum of the images plus the model's correction of the
+    sum's discretisation, which is small where the light is broad and moves a sun's highlight
+    where the model puts it).
+    """
 
     field: ReflectanceField
     name: str
     base: LightPredictor
+    interpolation: InterpolationMethod = "barycentric"
     _residual: dict[int, NDArray[np.float32]] = default(default_factory=dict)
 
     def _residual_of(self, camera: int) -> NDArray[np.float32]:
@@ -381,7 +391,7 @@ class _Residual:
 
     def predict(self, camera: int, directions: NDArray[np.floating]) -> NDArray[np.float32]:
         measured = self.field.light_directions
-        weights = interpolation_weights(measured, directions, "barycentric", policy="clamp")
+        weights = interpolation_weights(measured, directions, self.interpolation, policy="clamp")
         correction = weights.apply(self._residual_of(camera))
         return _bounded(self.field, camera, self.base.predict(camera, directions) + correction)
 
@@ -568,7 +578,8 @@ def environment_radiance(
     if isinstance(predictor, _Residual):
         base = environment_radiance(predictor.base, camera, lights, samples)
         residual = predictor._residual_of(camera)
-        return (base + _summed_barycentric(predictor.field, lights, residual)).astype(np.float32)
+        summed = _summed_interpolation(predictor.field, lights, residual, predictor.interpolation)
+        return (base + summed).astype(np.float32)
     if isinstance(predictor, MixturePredictor):
         mixed = np.zeros((samples, 3), dtype=np.float64)
         for member, weight in zip(predictor.members, predictor.weights, strict=True):
@@ -577,7 +588,8 @@ def environment_radiance(
     if isinstance(predictor, _Adaptive):
         share = predictor.share(camera)[:, None]
         helped = environment_radiance(predictor.residual, camera, lights, samples)
-        alone = _summed_barycentric(predictor.field, lights, predictor.field.camera_slab(camera))
+        slab = predictor.field.camera_slab(camera)
+        alone = _summed_interpolation(predictor.field, lights, slab, "barycentric")
         return (share * helped + (1.0 - share) * alone).astype(np.float32)
     out = np.zeros((samples, 3), dtype=np.float64)
     batch = max(1, min(len(rgb), BATCH_BYTES // max(1, 12 * samples)))
@@ -587,12 +599,15 @@ def environment_radiance(
     return out.astype(np.float32)
 
 
-def _summed_barycentric(
-    field: ReflectanceField, lights: LightSet, values: NDArray[np.floating]
+def _summed_interpolation(
+    field: ReflectanceField,
+    lights: LightSet,
+    values: NDArray[np.floating],
+    method: InterpolationMethod,
 ) -> NDArray[np.float64]:
-    """Sum over ``lights`` of rgb x the barycentric interpolation of ``values`` (T, P, 3)."""
+    """Sum over ``lights`` of rgb x the interpolation of ``values`` (T, P, 3) by ``method``."""
     sparse = interpolation_weights(
-        field.light_directions, lights.directions, "barycentric", policy="clamp"
+        field.light_directions, lights.directions, method, policy="clamp"
     )
     per_light = np.zeros((len(field.light_directions), 3), dtype=np.float64)
     rgb = np.asarray(lights.rgb, dtype=np.float64)
@@ -665,6 +680,10 @@ def make_predictor(
     basis = name.removesuffix("-8bit")
     if basis in BASIS_MODELS:
         return _Basis(field, name, basis, name.endswith("-8bit"), scale)
+    if name.startswith("light-stage+"):
+        model = name.removeprefix("light-stage+")
+        fitted = _fitted_models(field, [model], models, progress)
+        return _Residual(field, name, _Model(field, model, fitted), interpolation="nearest")
     model = "lambert+ggx" if name == "adaptive" else name.removesuffix("+residual")
     fitted = _fitted_models(field, [model], models, progress)
     base = _Model(field, model, fitted)
