@@ -48,7 +48,12 @@ from core.image_io import TransferChoice
 from core.point_spacing import point_spacing
 from processing.image_quality import ImageQuality, display_8bit, display_scale, image_quality
 from processing.rti import import_rti
-from render.light_prediction import PREDICTORS, LightPredictor, make_predictor
+from render.light_prediction import (
+    PREDICTORS,
+    LightPredictor,
+    make_predictor,
+    training_summary,
+)
 from render.splat import plan_splats, splat
 
 __all__ = [
@@ -236,7 +241,9 @@ class MethodResult:
     per_image : tuple of ImageQuality, in test-image order (camera-major)
     seconds : float, fitting the method and predicting every test image
     predict_ms : float, milliseconds to predict one more image once fitted
-    note : str, why the method does not apply, or what it chose (sigma)
+    note : str, why the method does not apply, or what it chose (sigma, a training's length)
+    training : tuple of dict, a learned method's curve: per pass, its phase, epoch, seconds,
+        training error and held-out error (None without held-out lights)
     """
 
     name: str
@@ -245,6 +252,7 @@ class MethodResult:
     seconds: float
     predict_ms: float
     note: str = ""
+    training: tuple[dict[str, Any], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -284,6 +292,7 @@ class Evaluation:
                     "seconds": m.seconds,
                     "predict_ms": m.predict_ms,
                     "note": m.note,
+                    **({"training": list(m.training)} if m.training else {}),
                 }
                 for m in self.methods
             },
@@ -311,7 +320,23 @@ class Evaluation:
                 f"| {m.name} | {q.psnr:.2f} | {q.ssim:.4f} | {q.delta_e:.2f} | "
                 f"{q.rel_rmse:.2%} | {m.seconds:.2f} | {m.predict_ms:.1f} | {m.note} |"
             )
+        for m in ranked:
+            if m.training:
+                lines.append("")
+                lines.append(f"{m.name}: {_curve(m.training)}")
         return "\n".join(lines) + "\n"
+
+
+def _curve(training: Sequence[dict[str, Any]], points: int = 6) -> str:
+    """A training curve in a line: error at a few passes (held-out error where lights were)."""
+    steps = np.unique(np.linspace(0, len(training) - 1, min(points, len(training))).astype(int))
+    parts = []
+    for record in (training[i] for i in steps):
+        held = record["validation_error"]
+        extra = "" if held is None else f", held-out {held:.4f}"
+        parts.append(f"pass {record['epoch']} ({record['phase']}, {record['seconds']:.0f} s): "
+                     f"training {record['train_error']:.4f}{extra}")  # fmt: skip
+    return "; ".join(parts)
 
 
 def _check_pair(fit: ReflectanceField, test: ReflectanceField) -> None:
@@ -417,7 +442,8 @@ def _score_method(
     )
     sigma = getattr(predictor, "sigma", None)
     note = f"sigma {sigma:.3g}" if isinstance(sigma, float) else ""
-    return MethodResult(name, mean, scores, elapsed, per_image_ms, note)
+    trained, curve = training_summary(predictor)
+    return MethodResult(name, mean, scores, elapsed, per_image_ms, note or trained, tuple(curve))
 
 
 def _chosen(fit: ReflectanceField, test: ReflectanceField, *, fast: bool) -> LightPredictor:

@@ -55,6 +55,7 @@ lights are the rig's upper hemisphere, where the hemispherical harmonics are def
 
 from __future__ import annotations
 
+import math
 import weakref
 from dataclasses import dataclass
 from dataclasses import field as default
@@ -100,6 +101,7 @@ __all__ = [
     "leave_one_out_barycentric",
     "make_predictor",
     "rbf_weights",
+    "training_summary",
 ]
 
 PredictorName = Literal[
@@ -489,11 +491,17 @@ class _Learned:
         values = np.concatenate(parts, axis=1)
         if values.shape[1] == 0:
             raise InputError(f"{self.field.path}: no camera sees any sample; nothing to learn")
-        bar = tqdm(
-            total=self.settings.steps, desc="training", unit="step", disable=not self.progress
-        )
+        bar = tqdm(desc="training", unit="step", disable=not self.progress)
+
+        def advance(step: int, planned: int) -> None:
+            # The steps foreseen change as training learns its pace (a time budget).
+            if bar.total != planned:
+                bar.total = planned
+                bar.refresh()
+            bar.update(step - bar.n)
+
         try:
-            return train_learned_rti(values, lights, self.settings, lambda *_: bar.update())
+            return train_learned_rti(values, lights, self.settings, advance)
         finally:
             bar.close()
 
@@ -547,6 +555,37 @@ class MixturePredictor:
         for member, weight in zip(self.members, self.weights, strict=True):
             out += weight[None, :, None] * member.predict(camera, directions)
         return out
+
+
+def training_summary(
+    predictor: LightPredictor,
+) -> tuple[str, list[dict[str, float | str | None]]]:
+    """How a learned predictor trained: a short note and its curve (empty for other methods).
+
+    Returns
+    -------
+    note : str, passes, seconds and device of the model(s) trained so far
+    curve : list of dict, per pass: phase, epoch, seconds, train_error, validation_error
+        (None where no lights were held out)
+    """
+    learned = predictor if isinstance(predictor, _Learned) else getattr(predictor, "base", None)
+    if not isinstance(learned, _Learned):
+        return "", []
+    trained = _TRAINED.get(learned.field, {})
+    models = [m for (_, settings), m in trained.items() if settings == learned.settings]
+    if not models:
+        return "", []
+    model = models[0]
+    note = (
+        f"trained {model.epochs} passes ({model.steps} steps) in {model.seconds:.0f} s on "
+        f"{model.device}"
+    )
+    curve: list[dict[str, float | str | None]] = [
+        {"phase": r.phase, "epoch": r.epoch, "seconds": r.seconds, "train_error": r.train_error,
+         "validation_error": None if math.isnan(r.validation_error) else r.validation_error}
+        for r in model.history
+    ]  # fmt: skip
+    return note, curve
 
 
 def environment_radiance(
