@@ -41,7 +41,6 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import grid_lights
 from processing.image_quality import relative_rmse
-from processing.learned_rti import TrainingSettings
 from processing.lights import disassemble_lights
 from processing.measured_region import MeasuredRegion
 from processing.panorama import Panorama
@@ -50,7 +49,7 @@ from render.light_prediction import make_predictor
 from render.predictor_relight import PredictorRelightSettings
 from render.relight_mode import MOST_ACCURATE_MODELS, RelightMode
 from render.relighter import RelightSettings
-from render.rung_choice import FOLD_TRAINING, GAP_EXPONENT
+from render.rung_choice import GAP_EXPONENT
 
 __all__ = [
     "ENVIRONMENT_CANDIDATES",
@@ -165,10 +164,8 @@ def _summed_error(
 ) -> float:
     """Relative RMSE of ``name`` fitted on ``fit``, its ``test`` predictions summed alike."""
     weights, truth = _weighted_truth(field, panorama, test)
-    whole = len(fit) == field.shape[1]
-    part = field if whole else field.subset(lights=fit)
-    training = TrainingSettings() if whole else FOLD_TRAINING
-    predictor = make_predictor(part, "nearest" if name == LIGHT_STAGE else name, learned=training)
+    part = field if len(fit) == field.shape[1] else field.subset(lights=fit)
+    predictor = make_predictor(part, "nearest" if name == LIGHT_STAGE else name)
     predicted = predictor.predict(0, field.light_directions[test])
     estimate = np.einsum("qc,qpc->pc", weights, predicted.astype(np.float64))
     seen = field.visibility[0]

@@ -39,7 +39,6 @@ from core.directions import angle_between
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from processing.image_quality import display_scale
-from processing.learned_rti import TrainingSettings
 from processing.measured_region import MeasuredRegion
 from render.evaluation import lowest_lights, split_lights
 from render.light_prediction import LightPredictor, MixturePredictor, make_predictor
@@ -81,9 +80,6 @@ MIXTURE_BYTES = 1536 * 2**20
 #: How the use's error grows with its gap (see :class:`UseGaps`): between the linear growth of
 #: features sharper than the gap and the quadratic growth of interpolating smooth data.
 GAP_EXPONENT = 1.5
-#: The learned rung's training on a fold: half the time budget of the final training (a fold
-#: holds half the lights, so about as many passes), so the choice costs about two trainings.
-FOLD_TRAINING = TrainingSettings(max_seconds=TrainingSettings().max_seconds / 2)
 #: The fold that holds out the lowest lights (extrapolation below the measured lights).
 LOWEST = "the lowest lights"
 
@@ -297,7 +293,7 @@ def _trial(
     bar.update()
     errors, held_out = [], []
     for (_, fit, test), truth in zip(folds, truths, strict=True):
-        predicted = make_predictor(field.subset(lights=fit), name, learned=FOLD_TRAINING).predict(
+        predicted = make_predictor(field.subset(lights=fit), name).predict(
             0, field.light_directions[test]
         )[:, seen]
         errors.append(mse(predicted, truth))
