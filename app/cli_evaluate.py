@@ -44,8 +44,8 @@ def add_below_horizon_option(p: argparse.ArgumentParser) -> None:
 
 def add_evaluate(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``rig evaluate`` on the ``rig`` sub-command parser."""
-    from render.evaluation import SPLITS
     from render.light_prediction import PREDICTORS
+    from render.light_splits import SPLITS
 
     p = commands.add_parser(
         "evaluate",
@@ -107,7 +107,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     from core.atomic import atomic_path, write_json_atomic
     from core.field_store import ReflectanceField, is_field_store
     from processing.rti import open_field_or_rti
-    from render.evaluation import evaluate, split_lights, test_field_from_lp
+    from render.evaluation import evaluate, test_field_from_lp
+    from render.light_splits import split_lights
 
     with open_field_or_rti(args.field, progress=not args.quiet, transfer=args.transfer) as field:
         mask = None if args.mask is None else _read_mask(args.mask, field.image_shape)

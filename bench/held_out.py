@@ -36,8 +36,9 @@ from core.directions import hemisphere_layout
 from core.field_store import ReflectanceField
 from core.sample_data import rti_capture_path
 from processing.rti import open_field_or_rti, write_rti_capture
-from render.evaluation import Evaluation, evaluate, split_lights, test_field_from_lp
+from render.evaluation import Evaluation, evaluate, test_field_from_lp
 from render.light_prediction import PREDICTORS
+from render.light_splits import split_lights
 from sim.field import field_cameras, simulate_field
 from sim.mitsuba_world import DEFAULT_MAX_DEPTH, load_world, render_world_field
 from sim.world_rti import render_world_rti

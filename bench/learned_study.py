@@ -37,8 +37,9 @@ from core.sample_data import rti_capture_path
 from processing.image_quality import psnr_8bit
 from processing.learned_rti import TrainingSettings
 from processing.rti import open_field_or_rti
-from render.evaluation import split_lights, test_field_from_lp
+from render.evaluation import test_field_from_lp
 from render.light_prediction import make_predictor
+from render.light_splits import split_lights
 
 #: The former rung's network: an encoder, codes of 9, the raw light direction, 50-unit decoder.
 _NEURAL_RTI = TrainingSettings(

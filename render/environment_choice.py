@@ -44,8 +44,8 @@ from processing.image_quality import relative_rmse
 from processing.lights import disassemble_lights
 from processing.measured_region import MeasuredRegion
 from processing.panorama import Panorama
-from render.evaluation import lowest_lights, split_lights
 from render.light_prediction import make_predictor
+from render.light_splits import lowest_lights, split_lights
 from render.predictor_relight import PredictorRelightSettings
 from render.relight_mode import MOST_ACCURATE_MODELS, RelightMode
 from render.relighter import RelightSettings

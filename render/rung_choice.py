@@ -40,8 +40,8 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from processing.image_quality import display_scale
 from processing.measured_region import MeasuredRegion
-from render.evaluation import lowest_lights, split_lights
 from render.light_prediction import LightPredictor, MixturePredictor, make_predictor
+from render.light_splits import lowest_lights, split_lights
 
 __all__ = [
     "GAP_EXPONENT",

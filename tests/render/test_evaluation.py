@@ -10,7 +10,8 @@ import pytest
 from core.directions import hemisphere_layout
 from core.errors import InputError
 from core.field_store import ReflectanceField
-from render.evaluation import evaluate, ring_groups, split_lights
+from render.evaluation import evaluate
+from render.light_splits import ring_groups, split_lights
 from sim.field import field_cameras, simulate_field
 
 CAMERAS = field_cameras(3, width=32, height=32)
