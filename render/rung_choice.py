@@ -4,17 +4,20 @@
 every rung the same question on the field's own lights, in folds that look like the use:
 
 - every other light held out, and the same split swapped (the fit lights and the test lights
-  trade places), so every light is predicted once from neighbours as far as the ones to fill;
+  trade places), so every light is predicted once from its neighbours;
 - when a requested light lies outside the measured lights (below the lowest ring), the lowest
-  sixth of the lights held out as well (:func:`render.evaluation.lowest_lights`): extrapolation
+  sixth of the lights held out as well (:func:`render.light_splits.lowest_lights`): extrapolation
   is tested where the use extrapolates.
 
-Each candidate's score is the PSNR of the 8-bit sRGB images (the RTI literature's metric) over
-every fold's test images. Objects mix materials (a matte base, a glossy figure, metal inlays),
-and the best rung differs between them; so the best :data:`MIXED` candidates are also mixed
-per pixel, each pixel weighting a member by the inverse of its held-out error there (smoothed
-over a few pixels). The mixture is scored honestly: a fold's weights come from the errors of
-the other folds only. The winner, a rung or the mixture, is refitted on every light.
+Each candidate is fitted on every light and on each fold. Its expected error in the use, per
+pixel, is its error at the measured lights plus its held-out excess scaled to the gaps of the
+requested lights (:class:`UseGaps`: a held-out dome light is as far from the rest as the dome's
+spacing, a requested light usually lies between measured ones), on the 8-bit sRGB levels the RTI
+literature's PSNR compares. Objects mix materials (a matte base, a glossy figure, metal inlays),
+and the best rung differs between them; so the best :data:`MIXED` candidates are also mixed per
+pixel, each pixel weighting a member by the inverse of its expected error there (smoothed over
+a few pixels). The mixture is scored honestly: a fold's weights come from the errors of the
+other folds only. The winner, a rung or the mixture, predicts with its fits on every light.
 
 Fields of pixels mix; a field of points chooses one rung (its samples have no image grid to
 smooth the errors over).
@@ -201,7 +204,7 @@ def choose_light_rung(
     ----------
     field : ReflectanceField (camera 0 is scored: a field of pixels' one view)
     queries : ndarray (Q, 3), optional, the lights to predict (rig frame; see
-        :func:`light_folds` and :func:`use_errors`)
+        :func:`light_folds` and :class:`UseGaps`)
     fast : bool, leave out the candidates that train a network
     candidates : names, optional (default :data:`LIGHT_CANDIDATES`, then
         :data:`SLOW_CANDIDATES` unless ``fast``)
