@@ -313,7 +313,9 @@ def _relight_mode(args: argparse.Namespace, field: Any, relit: Any) -> tuple[Any
         return mode, models_for_field(field, args.models, progress=True), None
     flags = (args.scheme, args.interp, args.view_interp, args.k, args.m, args.n)
     if args.method != "auto" or (field.sample_kind == "pixels" and all(f is None for f in flags)):
-        return _pixel_field_mode(args, field, relit), None, None
+        # A saved fit (--models) serves the choice and the engine instead of a new one.
+        saved = None if args.models is None else models_for_field(field, args.models)
+        return _pixel_field_mode(args, field, relit, saved), saved, None
     if all(flag is None for flag in flags):
         choice = most_accurate_mode(field, models_path=args.models, progress=True)
         print(f"relighting mode: {choice.reason}")
@@ -330,7 +332,7 @@ def _relight_mode(args: argparse.Namespace, field: Any, relit: Any) -> tuple[Any
     return settings, None, None
 
 
-def _pixel_field_mode(args: argparse.Namespace, field: Any, relit: Any) -> Any:
+def _pixel_field_mode(args: argparse.Namespace, field: Any, relit: Any, models: Any) -> Any:
     """``--method`` (or its automatic choice under the panorama) on a field of pixels."""
     from render.environment_choice import choose_environment_mode, environment_mode
 
@@ -346,7 +348,7 @@ def _pixel_field_mode(args: argparse.Namespace, field: Any, relit: Any) -> Any:
         raise InputError(f"--method {args.method} chooses the relighting; drop {', '.join(given)}")
     if args.method != "auto":
         return environment_mode(args.method, progress=True)
-    choice = choose_environment_mode(field, relit, fast=args.fast, progress=True)
+    choice = choose_environment_mode(field, relit, models=models, fast=args.fast, progress=True)
     for score in choice.scores:
         print(f"  {score.name:<22} {score.error:7.2%}  ({score.seconds:.1f} s)")
     print(f"relighting mode: {choice.reason}")

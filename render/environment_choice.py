@@ -44,6 +44,7 @@ from processing.image_quality import relative_rmse
 from processing.lights import disassemble_lights
 from processing.measured_region import MeasuredRegion
 from processing.panorama import Panorama
+from processing.sample_models import SampleModels
 from render.light_prediction import make_predictor
 from render.light_splits import lowest_lights, split_lights
 from render.predictor_relight import PredictorRelightSettings
@@ -161,11 +162,18 @@ def _summed_error(
     name: str,
     fit: NDArray[np.int64],
     test: NDArray[np.int64],
+    models: SampleModels | None = None,
 ) -> float:
-    """Relative RMSE of ``name`` fitted on ``fit``, its ``test`` predictions summed alike."""
+    """Relative RMSE of ``name`` fitted on ``fit``, its ``test`` predictions summed alike.
+
+    ``models``: a fit of the whole field, used when ``fit`` is every light.
+    """
     weights, truth = _weighted_truth(field, panorama, test)
-    part = field if len(fit) == field.shape[1] else field.subset(lights=fit)
-    predictor = make_predictor(part, "nearest" if name == LIGHT_STAGE else name)
+    whole = len(fit) == field.shape[1]
+    part = field if whole else field.subset(lights=fit)
+    predictor = make_predictor(
+        part, "nearest" if name == LIGHT_STAGE else name, models=models if whole else None
+    )
     predicted = predictor.predict(0, field.light_directions[test])
     estimate = np.einsum("qc,qpc->pc", weights, predicted.astype(np.float64))
     seen = field.visibility[0]
@@ -195,6 +203,7 @@ def choose_environment_mode(
     panorama: Panorama,
     *,
     candidates: Sequence[str] | None = None,
+    models: SampleModels | None = None,
     fast: bool = False,
     progress: bool = False,
 ) -> EnvironmentChoice:
@@ -206,6 +215,8 @@ def choose_environment_mode(
     panorama : Panorama, as the object sees it (yaw, exposure and the horizon applied)
     candidates : names, optional; default :data:`ENVIRONMENT_CANDIDATES` and, unless ``fast``,
         :data:`SLOW_CANDIDATES`
+    models : SampleModels, optional, a saved fit of the field (else fitted, or read from beside
+        a store)
     fast : bool, leave out the candidates that train a network
     progress : bool, a progress bar over the candidates
 
@@ -234,7 +245,9 @@ def choose_environment_mode(
                         error = _summed_error(field, panorama, name, fit, test)
                         # The use's gaps are narrower than a held-out light's: the excess over
                         # the error at the measured lights shrinks (rung_choice.UseGaps).
-                        inside = _summed_error(field, panorama, name, everything, everything)
+                        inside = _summed_error(
+                            field, panorama, name, everything, everything, models
+                        )
                         excess = max(error**2 - inside**2, 0.0) * ratio**GAP_EXPONENT
                         errors[name].append(weight * math.sqrt(inside**2 + excess))
                     except InputError as problem:  # a basis with more terms than the lights
