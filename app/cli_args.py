@@ -22,6 +22,7 @@ from core.memory_budget import available_memory, parse_size
 __all__ = [
     "IMAGE_BYTES_PER_PIXEL",
     "MAX_IMAGE_SIDE",
+    "add_camera_options",
     "angles",
     "count",
     "finite",
@@ -250,3 +251,12 @@ def cluster_for(args: argparse.Namespace) -> AbstractContextManager[Any]:
     if args.dask != "local" and (args.workers or args.worker_memory):
         raise InputError("--workers and --worker-memory size a local cluster: add --dask local")
     return dask_client(args.dask, workers=args.workers, memory_limit=args.worker_memory)
+
+
+def add_camera_options(p: argparse.ArgumentParser) -> None:
+    """Camera flags shared by every command that renders a view (same defaults everywhere)."""
+    p.add_argument("--distance", type=positive, default=4.0, help="camera distance (default 4)")
+    p.add_argument("--fov", type=positive, default=40.0, help="horizontal field of view, degrees")
+    p.add_argument(
+        "--size", type=image_size, default=(512, 512), help="image WIDTHxHEIGHT (512x512)"
+    )
