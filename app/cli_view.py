@@ -15,7 +15,7 @@ from typing import Any
 from app.cli_args import image_size, whole
 from app.cli_evaluate import add_below_horizon_option, add_transfer_option
 
-__all__ = ["add_view", "open_session"]
+__all__ = ["add_view", "open_session", "read_panoramas"]
 
 
 def add_view(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -53,37 +53,67 @@ def _port(text: str) -> int:
     return value
 
 
-def open_session(
-    field: Any, panoramas: list[Path] | None, *, size: tuple[int, int], models: Path | None
-) -> Any:
-    """The live session of ``field`` under the given panoramas (default: the bundled ones)."""
+def read_panoramas(paths: list[Path] | None) -> dict[str, Any]:
+    """The panoramas to offer by name (default: the bundled ones), their notes printed."""
     from core.sample_data import PANORAMA_NAMES, panorama_path
     from processing.panorama import read_panorama
-    from render.live_session import LiveSession
-    from render.relight_mode import most_accurate_mode
-    from sim.ground_truth import field_truth
 
-    paths = panoramas or [panorama_path(name) for name in PANORAMA_NAMES]
     loaded = {}
-    for path in paths:
+    for path in paths or [panorama_path(name) for name in PANORAMA_NAMES]:
         panorama = read_panorama(path)
         if panorama.note:
             print(panorama.note)
         loaded[path.name] = panorama
+    return loaded
+
+
+def open_session(
+    field: Any,
+    panoramas: list[Path] | dict[str, Any] | None,
+    *,
+    size: tuple[int, int],
+    models: Path | None,
+    source: Path | None = None,
+    report: Any = None,
+) -> Any:
+    """The live session of ``field`` under the given panoramas (default: the bundled ones).
+
+    ``report(status)``, when given, is told each stage as it starts (the viewer's page shows it).
+    """
+    from render.live_session import LiveSession
+    from render.relight_mode import most_accurate_mode
+    from sim.ground_truth import field_truth
+
+    def stage(status: str) -> None:
+        if report is not None:
+            report(status)
+
+    loaded = panoramas if isinstance(panoramas, dict) else read_panoramas(panoramas)
+    stage("choosing the most accurate mode (fitting the models once; a saved fit is reused)")
     choice = most_accurate_mode(field, models_path=models, progress=True)
     print(f"best mode: {choice.reason}")
-    return LiveSession(field, choice, loaded, size=size, truth=field_truth(field.provenance))
+    return LiveSession(
+        field, choice, loaded, size=size, truth=field_truth(field.provenance), source=source
+    )
 
 
 def _run_view(args: argparse.Namespace) -> int:
-    from app.live_server import start_viewer
+    from functools import partial
+
+    from app.live_server import PendingSession, start_viewer
     from processing.rti import open_field_or_rti
 
     with open_field_or_rti(
         args.field, progress=True, transfer=args.transfer, below_horizon=args.below_horizon
     ) as field:
-        session = open_session(field, args.env, size=args.size, models=args.models)
-        server = start_viewer(session, host=args.host, port=args.port)
+        # The page is served at once and says what is being prepared (the best mode's fit
+        # takes seconds to minutes); a panorama that cannot be read fails the command first.
+        panoramas = read_panoramas(args.env)
+        opening = partial(
+            open_session, field, panoramas, size=args.size, models=args.models, source=args.field
+        )
+        pending = PendingSession(field, lambda report: opening(report=report), args.field)
+        server = start_viewer(pending, host=args.host, port=args.port)
         print(f"rig view: open {server.url} in a browser (Ctrl-C stops)", flush=True)
         try:
             server.wait()

@@ -18,6 +18,7 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
 from typing import Any, Literal, get_args
 
 import cv2
@@ -270,6 +271,8 @@ class LiveSession:
     panoramas : mapping of name to Panorama, at least one
     size : (width, height) of views of a field of points (a field of pixels has its own)
     truth : TruthRenderer, optional, the ground truth of a simulated field
+    source : Path, optional, what the person opened (an RTI capture is imported into a
+        temporary store: its path would say nothing); default the field's store
     """
 
     def __init__(
@@ -280,10 +283,12 @@ class LiveSession:
         *,
         size: tuple[int, int] = (512, 512),
         truth: TruthRenderer | None = None,
+        source: Path | None = None,
     ) -> None:
         if not panoramas:
             raise InputError("the viewer needs at least one panorama")
         self.field = field
+        self.source = source or field.path
         self.best = best
         self.size = size
         self.truth = truth
@@ -432,11 +437,27 @@ class LiveSession:
             raise InputError("no frame has been rendered yet")
         return self.frame
 
+    def idle_controls(self, controls: LiveControls) -> dict[str, str]:
+        """The controls that change nothing in the mode ``controls`` select, each with why.
+
+        A page disables them and says why, rather than re-rendering the same frame.
+        """
+        mode = self.mode(controls)
+        if mode.sampled_k is not None:
+            return {}
+        why = (
+            f"{mode.describe(self.best.models if mode.uses_models else None)} lights with every "
+            "part of the panorama: K, the sampler and a modulation map steer sampled lights "
+            "(the paper's configuration)"
+        )
+        return {"k": why, "sampler": why, "modulation": why}
+
     def warnings(self) -> tuple[str, ...]:
         """The guards' warnings for the last frame's lighting and view.
 
         Apart from :meth:`render` (about 0.1 s: they read the panorama and the capture), so a
-        viewer shows the frame first.
+        viewer shows the frame first. Where a warning's remedy is relighting through the
+        models and the best mode does, it names the page's mode rather than a flag.
         """
         frame = self._last_frame()
         key = (*frame.controls.lighting_key(), frame.camera)
@@ -445,7 +466,12 @@ class LiveSession:
                 self.field, frame.camera, frame.environment.panorama.rgb, frame.relight_mode,
                 self.best.models, self.best.comparison,
             )  # fmt: skip
-            self._warnings = {key: tuple(str(warning) for warning in found)}
+            remedy = "--scheme model"
+            if self.best.mode.uses_models:
+                remedy = "the viewer's best mode"
+            self._warnings = {
+                key: tuple(str(warning).replace("--scheme model", remedy) for warning in found)
+            }
         return self._warnings[key]
 
     def compare_truth(self) -> TruthComparison | None:

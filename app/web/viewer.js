@@ -43,9 +43,15 @@ function fillSelect(select, names, keepFirst) {
   }
 }
 
+function showField(info) {
+  $("field").textContent = info.kind === "pixels"
+    ? `${info.field} (${info.image_shape[1]} × ${info.image_shape[0]} pixels, ${info.shape[1]} lights)`
+    : `${info.field} (${info.kind}, ${info.shape.join(" × ")})`;
+}
+
 function applyState(info) {
   state.info = info;
-  $("field").textContent = `${info.field} (${info.kind}, ${info.shape.join(" × ")})`;
+  showField(info);
   $("best-reason").textContent = info.modes.best;
   $("paper-mode").textContent = info.modes.paper;
   fillSelect($("panorama-name"), info.panoramas, false);
@@ -53,6 +59,17 @@ function applyState(info) {
   fillSelect($("sampler"), info.samplers, false);
   $("truth-on").disabled = !info.has_truth;
   $("orbit-hint").hidden = !info.can_orbit;
+  if (info.kind === "pixels") {
+    // A capture's own few pixels: shown enlarged (whole steps, each pixel visible) so the
+    // frame and its caption are readable.
+    const [, width] = info.image_shape;
+    $("frame").classList.add("pixels");
+    $("frame").style.width = `${Math.max(1, Math.floor(480 / width)) * width}px`;
+    if (!state.lightStarted) {
+      state.lightStarted = true;
+      lightView.start();
+    }
+  }
   state.controls = { ...info.controls, ...state.controls };
   showControls(state.controls);
 }
@@ -99,14 +116,31 @@ function onMessage(event) {
     if (!message.controls.truth) {
       $("truth-figure").hidden = $("error-figure").hidden = true;
     }
+    showIdle(message.idle || {});
   } else if (message.type === "warnings") {
+    // Folded to one line (the panorama stays in view); the codes say what they are about.
     $("warnings").replaceChildren(...message.warnings.map((w) => Object.assign(
       document.createElement("li"), { textContent: w })));
+    const codes = message.warnings.map((w) => (w.match(/^warning \(([^)]+)\)/) || [, "warning"])[1]);
+    $("warnings-box").hidden = message.warnings.length === 0;
+    $("warnings-summary").textContent = `${message.warnings.length} warning${message.warnings.length > 1 ? "s" : ""}: ${codes.join(", ")}`;
   } else if (message.type === "truth") {
     $("truth-error").textContent = `relative RMSE ${(100 * message.relative_rmse).toFixed(2)} %`;
   } else if (message.type === "error") {
     $("status").textContent = `error: ${message.message}`;
   }
+}
+
+// Controls that change nothing in this mode: disabled, with the reason beside them.
+function showIdle(idle) {
+  $("k").disabled = "k" in idle;
+  $("sampler").disabled = "sampler" in idle;
+  $("modulation-controls").disabled = "modulation" in idle;
+  for (const id of ["k", "sampler"]) $(id).title = idle[id] || "";
+  $("modulation-controls").title = idle.modulation || "";
+  const reasons = [...new Set(Object.values(idle))];
+  $("idle-note").hidden = reasons.length === 0;
+  $("idle-note").textContent = reasons.join("; ");
 }
 
 function connect() {
@@ -255,10 +289,30 @@ function wire() {
   });
 }
 
+// The server opens the session after printing the URL (the best mode's fit takes a while):
+// say what it is doing until it is ready; a capture's directional light comes first.
 async function start() {
   wire();
-  const response = await fetch("api/state");
-  applyState(await response.json());
+  for (;;) {
+    const info = await (await fetch("api/state")).json();
+    if (info.status === "ready") {
+      applyState(info);
+      document.body.classList.remove("preparing");
+      break;
+    }
+    showField(info);
+    if (info.kind === "pixels" && !state.lightStarted) {
+      state.lightStarted = true;
+      lightView.start();
+    }
+    if (info.status === "failed") {
+      $("status").textContent = `the viewer could not start: ${info.error}`;
+      return;
+    }
+    $("status").textContent = `server: ${info.status}… (${info.elapsed_s} s)`;
+    await new Promise((r) => setTimeout(r, 400));
+  }
+  $("status").textContent = "connecting…";
   connect();
 }
 

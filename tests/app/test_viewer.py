@@ -176,13 +176,19 @@ def test_truth_error_mode_switch_and_saving(
     assert np.abs(truth.astype(np.int16) - comparison.picture.astype(np.int16)).mean() < 2.0
     assert comparison.relative_rmse < 0.05  # the glossy sphere is the models' own family
 
+    # The best mode lights with the whole panorama: K and the sampler would do nothing.
+    assert page.is_disabled("#k") and page.is_disabled("#sampler")
+    assert "steer sampled lights" in page.inner_text("#idle-note")
     page.check("input[name=mode][value=paper]")
     _wait_frame(page, "state.meta.controls.mode === 'paper'")
+    assert page.is_enabled("#k") and page.is_hidden("#idle-note")
     assert "sampled, paper" in page.inner_text("#mode-name")
     page.select_option("#k", "16")
     _wait_frame(page, "state.meta.controls.k === 16")
     page.wait_for_function("() => document.getElementById('warnings').children.length > 0")
-    assert "ghosting" in page.inner_text("#warnings")  # a narrow lobe, 12 measured lights
+    assert "ghosting" in page.inner_text("#warnings-summary")  # a narrow lobe, 12 lights
+    page.click("#warnings-summary")  # folded until asked for
+    assert "ghosting" in page.inner_text("#warnings")
     _shown(page, "#panorama", "panorama-paper-k16")
 
     with page.expect_download() as download:

@@ -1,0 +1,114 @@
+"""The viewer's directional light: a field of pixels relit in the browser, on its GPU.
+
+An RTI user's one gesture is moving the light. The page does it in WebGL2
+(``app/web/light.js``) from the field's PTM and HSH fits written in the RTI web format
+(:func:`render.web_export.export_web`, the format OpenLIME reads, so the page and a published
+export show the same pixels): per frame
+the GPU weighs the coefficient planes by the light's basis, with no round trip to the server.
+This module prepares that export once per viewer, on the viewer's worker thread (the page shows
+its state from the moment the URL is printed), and describes it to the page.
+
+Large images are written as deep-zoom tiles and the page loads the tiles of the level the zoom
+needs; a small one is a single image per plane.
+"""
+
+from __future__ import annotations
+
+import time
+import traceback
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from core.errors import RigError
+from core.field_store import ReflectanceField
+
+if TYPE_CHECKING:
+    from render.web_export import WebModel
+
+__all__ = ["LIGHT_MODELS", "LightView"]
+
+#: The models the page relights with: HSH of order 3 first (the RTI tools' usual choice for
+#: dome captures), PTM beside it.
+LIGHT_MODELS: tuple[WebModel, ...] = ("hsh3", "ptm")
+#: Planes are lossless below this many pixels (a local viewer: no need to save bytes); JPEG
+#: (quality 95, full chroma) above, as the published export.
+LOSSLESS_PIXELS = 4_000_000
+
+
+class LightView:
+    """The export the page relights from: written by :meth:`prepare`, described to the page.
+
+    Parameters
+    ----------
+    field : ReflectanceField of pixels
+    folder : Path, an empty folder the export is written into (removed by the viewer's owner)
+    """
+
+    def __init__(self, field: ReflectanceField, folder: Path) -> None:
+        self.field = field
+        self.folder = folder
+        self.status = "waiting"
+        self.error: str | None = None
+        self.started = time.monotonic()
+        self.seconds: float | None = None
+        self._description: dict[str, Any] | None = None
+
+    def prepare(self) -> None:
+        """Write the export (on the caller's thread; the page polls :meth:`describe`)."""
+        from render.web_export import TILE_THRESHOLD, export_web
+
+        height, width = self.field.image_shape or (0, 0)
+        self.status = f"fitting {' and '.join(m.upper() for m in LIGHT_MODELS)} per pixel"
+        try:
+            written = export_web(
+                self.field,
+                self.folder,
+                models=LIGHT_MODELS,
+                image_format="png" if width * height <= LOSSLESS_PIXELS else "jpg",
+                quality=95,
+                tiles=max(width, height) > TILE_THRESHOLD,
+            )
+        except RigError as error:
+            self.status, self.error = "failed", str(error)
+            return
+        except Exception as error:  # a fault of ours: the log gets the traceback, the page why
+            traceback.print_exc()
+            self.status, self.error = "failed", f"internal error: {error}"
+            return
+        self._description = {
+            "width": written.width,
+            "height": written.height,
+            "normals": "rti/normals.png",
+            "models": {
+                m.model: {
+                    "url": f"rti/{m.model}/",
+                    "levels": m.levels,
+                    "rms_error": round(m.rms_error, 3),
+                }
+                for m in written.models
+            },
+        }
+        self.seconds = time.monotonic() - self.started
+        self.status = "ready"
+
+    def describe(self) -> dict[str, Any]:
+        """What the page needs: the state, and once ready the models' folders and sizes."""
+        out: dict[str, Any] = {
+            "status": self.status,
+            "elapsed_s": round(time.monotonic() - self.started, 1),
+        }
+        if self.error is not None:
+            out["error"] = self.error
+        if self._description is not None:
+            out.update(self._description, seconds=round(self.seconds or 0.0, 2))
+        return out
+
+    def file(self, relative: str) -> Path | None:
+        """A file of the export by its path relative to the folder; None outside it or absent."""
+        if self.status != "ready":
+            return None
+        root = self.folder.resolve()
+        path = (root / relative).resolve()
+        if not path.is_relative_to(root) or not path.is_file():
+            return None
+        return path

@@ -1,0 +1,188 @@
+"""``rig view``'s directional light in a real browser (Chromium, WebGL2 on SwiftShader).
+
+An RTI user moves the light: dragging the hemisphere pad must move the highlight the way the
+light moved, and what the page draws at a light must be what ``rig relight --lights --method
+hsh3-8bit`` writes at that light, within the 8-bit quantisation of the coefficient planes.
+Screenshots are kept in ``test-artifacts/light-view/``.
+"""
+
+from __future__ import annotations
+
+import json
+import urllib.request
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+
+from app.cli import main
+from app.cli_view import open_session
+from app.live_server import PendingSession, ViewerServer, start_viewer
+from core.camera_model import PinholeCamera, camera_to_rig
+from core.colour import luminance
+from core.directions import hemisphere_layout
+from core.field_store import FieldStoreWriter, ReflectanceField
+from core.sample_data import panorama_path, rti_capture_path
+from processing.rti import import_rti
+from tests.app.test_viewer import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS
+
+FOLDER = ARTIFACTS / "light-view"
+#: WebGL2 without a GPU: Chromium's software rasteriser.
+WEBGL_ARGS = [*CHROMIUM_ARGS, "--enable-unsafe-swiftshader", "--use-angle=swiftshader"]
+
+
+def _sphere_field(path: Path, size: int = 48) -> ReflectanceField:
+    """A glossy hemisphere seen from above under 49 dome lights (pixels; linear values)."""
+    lights = hemisphere_layout(49)
+    ys, xs = np.mgrid[0:size, 0:size]
+    u = (xs + 0.5) / size * 2 - 1
+    v = 1 - (ys + 0.5) / size * 2
+    inside = u**2 + v**2 < 1
+    normals = np.stack([u, v, np.sqrt(np.clip(1 - u**2 - v**2, 0, 1))], axis=-1)
+    halfway = lights + np.array([0.0, 0.0, 1.0])
+    halfway /= np.linalg.norm(halfway, axis=1, keepdims=True)
+    diffuse = np.clip(np.einsum("hwc,tc->thw", normals, lights), 0, None)
+    gloss = np.clip(np.einsum("hwc,tc->thw", normals, halfway), 0, None) ** 12
+    values = np.where(inside, 0.35 * diffuse + 0.5 * gloss, 0.02)[..., None] * [1.0, 0.9, 0.8]
+    camera = PinholeCamera(0.0, 0.0, 10.0, 10.0, size, size)
+    writer = FieldStoreWriter(
+        path, points=None, normals=None, light_directions=camera_to_rig(lights, camera),
+        cameras=[camera], image_shape=(size, size),
+    )  # fmt: skip
+    for t, image in enumerate(values):
+        writer.write_slab(0, t, image.reshape(-1, 3).astype(np.float32))
+    writer.write_visibility(0, np.ones(size * size, dtype=bool))
+    writer.finish()
+    return ReflectanceField.open(path)
+
+
+def _off_the_loop(call: Any) -> Any:
+    """Run ``call`` on another thread: Playwright's sync API holds this thread's event loop."""
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        return pool.submit(call).result()
+
+
+def _serve(field: ReflectanceField, source: Path) -> ViewerServer:
+    # As `rig view` does: the page is served at once, the session opened behind it.
+    panoramas = [panorama_path("courtyard")]
+    return _off_the_loop(
+        lambda: start_viewer(
+            PendingSession(
+                field,
+                lambda report: open_session(
+                    field, panoramas, size=(64, 64), models=None, source=source, report=report
+                ),
+                source,
+            )
+        )
+    )
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    if CHROMIUM is None:
+        pytest.skip("no Chromium installed (apt-get install chromium; CI installs it)")
+    playwright = pytest.importorskip("playwright.sync_api")
+    with playwright.sync_playwright() as p:
+        launched = p.chromium.launch(executable_path=CHROMIUM, args=WEBGL_ARGS)
+        yield launched
+        launched.close()
+
+
+def _open_page(browser: Any, url: str) -> tuple[Any, list[str]]:
+    page = browser.new_page(viewport={"width": 1400, "height": 900})
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.goto(url)
+    page.wait_for_function("() => Number(document.body.dataset.lightFrame || 0) > 0",
+                           timeout=300_000)  # fmt: skip
+    return page, errors
+
+
+def _snapshot(page: Any) -> np.ndarray:
+    """The page's image at its own resolution, as its shader draws it (RGB uint8)."""
+    width, height, data = page.evaluate("() => lightView.snapshot()")
+    return np.array(data, dtype=np.uint8).reshape(height, width, 4)[:, :, :3]
+
+
+def _bright_centroid(picture: np.ndarray) -> np.ndarray:
+    y = luminance(picture.astype(np.float64))
+    rows, cols = np.nonzero(y >= np.quantile(y, 0.98))
+    return np.array([cols.mean(), rows.mean()])
+
+
+def test_dragging_the_light_pad_moves_the_highlight(browser: Any, tmp_path: Path) -> None:
+    field = _sphere_field(tmp_path / "sphere.zarr")
+    server = _serve(field, tmp_path / "sphere.zarr")
+    try:
+        page, errors = _open_page(browser, server.url)
+        FOLDER.mkdir(parents=True, exist_ok=True)
+        pad = page.locator("#light-pad").bounding_box()
+        centre_y = pad["y"] + pad["height"] / 2
+        pictures = []
+        for name, fraction in (("left", 0.2), ("right", 0.8)):
+            # A drag across the pad, ending where the light should be.
+            page.mouse.move(pad["x"] + pad["width"] / 2, centre_y)
+            page.mouse.down()
+            page.mouse.move(pad["x"] + pad["width"] * fraction, centre_y, steps=6)
+            page.mouse.up()
+            page.wait_for_function("() => !lightView.state.pending")
+            light = page.evaluate("() => lightView.state.light")
+            assert light[0] == pytest.approx(fraction * 2 - 1, abs=0.05) and abs(light[1]) < 0.05
+            angles = page.inner_text("#light-angles")
+            assert ("azimuth 180.0°" if name == "left" else "azimuth 0.0°") in angles
+            page.screenshot(path=str(FOLDER / f"sphere-{name}.png"))
+            pictures.append(_snapshot(page))
+        left, right = (_bright_centroid(p) for p in pictures)
+        size = pictures[0].shape[1]
+        # The highlight sits where the normal halves light and view: left of centre, then right.
+        assert left[0] < 0.4 * size < 0.6 * size < right[0], (left, right)
+        assert abs(left[1] - right[1]) < 0.1 * size
+        assert errors == []
+        page.close()
+    finally:
+        _off_the_loop(server.stop)
+
+
+def test_the_page_draws_what_rig_relight_writes_at_that_light(browser: Any, tmp_path: Path) -> None:
+    capture = rti_capture_path()
+    field = import_rti(capture, tmp_path / "lion.zarr", progress=False)
+    server = _serve(field, capture)
+    try:
+        page, errors = _open_page(browser, server.url)
+        described = json.loads(urllib.request.urlopen(server.url + "api/light").read())
+        assert described["status"] == "ready" and set(described["models"]) == {"hsh3", "ptm"}
+        assert page.inner_text("#field").startswith(str(capture))  # not the temporary store
+        light = np.array([0.45, 0.3, 0.0])
+        light[2] = np.sqrt(1 - light[0] ** 2 - light[1] ** 2)
+        page.evaluate(f"() => lightView.setLight({light[0]}, {light[1]})")
+        page.wait_for_function("() => !lightView.state.pending")
+        page.screenshot(path=str(FOLDER / "lion.png"))
+        shown = _snapshot(page)
+
+        lp = tmp_path / "one.lp"
+        lp.write_text(f"1\nquery {light[0]:.9f} {light[1]:.9f} {light[2]:.9f}\n")
+        assert main([
+            "relight", str(capture), "--lights", str(lp), "--method", "hsh3-8bit",
+            "-o", str(tmp_path / "relit"),
+        ]) == 0  # fmt: skip
+        written = np.asarray(cv2.imread(str(tmp_path / "relit" / "query.png")))[:, :, ::-1]
+        assert written.shape == shown.shape == (43, 64, 3)
+
+        # The bound: each plane is rounded to its 8-bit level (half a step of its range),
+        # weighted by the basis at this light, and both pictures round to 8 bits.
+        info = json.loads(urllib.request.urlopen(server.url + "rti/hsh3/info.json").read())
+        weights = page.evaluate(f"() => lightView.weights('hsh', [{', '.join(map(str, light))}])")
+        scale = np.reshape(info["materials"][0]["scale"], (-1, 3))
+        bound = np.abs(weights) @ scale * 255 / 510 + 1.0  # levels, per channel
+        difference = np.abs(shown.astype(np.int16) - written.astype(np.int16))
+        assert (difference <= np.ceil(bound)).all(), (difference.max(), bound)
+        assert difference.mean() < 1.0
+        assert errors == []
+        page.close()
+    finally:
+        _off_the_loop(server.stop)
