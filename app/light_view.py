@@ -30,6 +30,9 @@ __all__ = ["LIGHT_MODELS", "LightView"]
 #: The models the page relights with: HSH of order 3 first (the RTI tools' usual choice for
 #: dome captures), PTM beside it.
 LIGHT_MODELS: tuple[WebModel, ...] = ("hsh3", "ptm")
+#: Images with a longer side than this (pixels) are written as deep-zoom tiles of this side.
+TILED_ABOVE = 2048
+TILE_SIDE = 254
 #: Planes are lossless below this many pixels (a local viewer: no need to save bytes); JPEG
 #: (quality 95, full chroma) above, as the published export.
 LOSSLESS_PIXELS = 4_000_000
@@ -55,7 +58,7 @@ class LightView:
 
     def prepare(self) -> None:
         """Write the export (on the caller's thread; the page polls :meth:`describe`)."""
-        from render.web_export import TILE_THRESHOLD, export_web
+        from render.web_export import export_web
 
         height, width = self.field.image_shape or (0, 0)
         self.status = f"fitting {' and '.join(m.upper() for m in LIGHT_MODELS)} per pixel"
@@ -66,7 +69,8 @@ class LightView:
                 models=LIGHT_MODELS,
                 image_format="png" if width * height <= LOSSLESS_PIXELS else "jpg",
                 quality=95,
-                tiles=max(width, height) > TILE_THRESHOLD,
+                tiles=max(width, height) > TILED_ABOVE,
+                tile_size=TILE_SIDE,
             )
         except RigError as error:
             self.status, self.error = "failed", str(error)

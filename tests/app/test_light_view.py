@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 import pytest
 
+from app import light_view
 from app.cli import main
 from app.cli_view import open_session
 from app.live_server import PendingSession, ViewerServer, start_viewer
@@ -186,3 +187,37 @@ def test_the_page_draws_what_rig_relight_writes_at_that_light(browser: Any, tmp_
         page.close()
     finally:
         _off_the_loop(server.stop)
+
+
+def test_deep_zoom_tiles_draw_the_same_image(
+    browser: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Tiles as a 24-megapixel capture gets them, on a small image: 16-pixel tiles, 3 levels.
+    field = _sphere_field(tmp_path / "sphere.zarr")
+    pictures = {}
+    for tiled in (False, True):
+        if tiled:
+            monkeypatch.setattr(light_view, "TILED_ABOVE", 32)
+            monkeypatch.setattr(light_view, "TILE_SIDE", 16)
+        server = _serve(field, tmp_path / "sphere.zarr")
+        try:
+            page, errors = _open_page(browser, server.url)
+            levels = page.evaluate("() => lightView.state.model.levels.length")
+            assert levels == (3 if tiled else 1)
+            page.evaluate("() => lightView.setLight(-0.3, 0.5)")
+            pictures[tiled] = _snapshot(page)
+            if tiled:
+                # Zoomed out to a quarter, the page draws the coarsest level's single tile.
+                page.evaluate("() => { lightView.state.view = {scale: 0.25, x: 0, y: 0}; }")
+                page.evaluate("() => lightView.setLight(-0.3, 0.5)")
+                page.wait_for_function("() => !lightView.state.pending")
+                drawn = page.evaluate("() => [...lightView.state.tiles.keys()]")
+                assert "hsh3/0/0_0" in drawn and any(k.startswith("hsh3/2/") for k in drawn)
+            assert errors == []
+            page.close()
+        finally:
+            _off_the_loop(server.stop)
+    # The finest level's tiles reassemble the image: the same planes, the same pixels (the
+    # overlap only feeds filtering across a seam).
+    difference = np.abs(pictures[True].astype(np.int16) - pictures[False].astype(np.int16))
+    assert difference.max() <= 1, difference.max()
