@@ -19,13 +19,13 @@ import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from core.errors import RigError
+from core.errors import InputError, RigError
 from core.field_store import ReflectanceField
 
 if TYPE_CHECKING:
     from render.web_export import WebModel
 
-__all__ = ["LIGHT_MODELS", "LightView"]
+__all__ = ["LIGHT_MODELS", "ChosenLight", "LightView"]
 
 #: The models the page relights with: HSH of order 3 first (the RTI tools' usual choice for
 #: dome captures), PTM beside it.
@@ -116,3 +116,77 @@ class LightView:
         if not path.is_relative_to(root) or not path.is_file():
             return None
         return path
+
+
+#: Largest image the server relights whole for the page (pixels): beyond, the page keeps to
+#: the GPU's fits (a server frame of 24 megapixels would take seconds and a 100 MB PNG).
+SERVER_PIXELS = 4_000_000
+
+
+class ChosenLight:
+    """The method ``rig relight --lights`` chooses, relit on the server one light at a time.
+
+    The GPU draws the linear fits (HSH, PTM); the method the held-out choice picks (a mixture,
+    adaptive, RBF, a residual over the models) is only computed here: once chosen
+    (:func:`render.rung_choice.choose_light_rung`, ``fast``: no network is trained while the
+    person waits), each light is one prediction of the whole image, shown as ``rig relight
+    --lights`` writes it (8-bit sRGB).
+
+    Parameters
+    ----------
+    field : ReflectanceField of pixels
+    """
+
+    def __init__(self, field: ReflectanceField) -> None:
+        self.field = field
+        self.status = "not chosen yet"
+        self.method: str | None = None
+        self._predictor: Any = None
+        self._scale = 1.0
+
+    def available(self) -> str | None:
+        """Why the server cannot draw this field (None: it can)."""
+        height, width = self.field.image_shape or (0, 0)
+        if width * height > SERVER_PIXELS:
+            return (
+                f"the chosen method is relit on the server for images up to "
+                f"{SERVER_PIXELS / 1e6:.0f} megapixels; this one has {width * height / 1e6:.1f}: "
+                "the HSH and PTM fits are drawn on the GPU at any size"
+            )
+        return None
+
+    def picture(self, light: tuple[float, float, float]) -> bytes:
+        """PNG of the field's view under ``light`` (camera frame: x right, y up, z to the camera).
+
+        The first call chooses the method (seconds to minutes; :attr:`status` says which).
+        """
+        import numpy as np
+
+        from core.camera_model import camera_to_rig
+        from core.image_io import encode_picture
+        from processing.image_quality import display_8bit, display_scale
+        from render.rung_choice import choose_light_rung
+
+        reason = self.available()
+        if reason is not None:
+            raise InputError(reason)
+        x, y, z = light
+        if not all(np.isfinite(light)) or z < 0 or abs(x * x + y * y + z * z - 1) > 1e-3:
+            raise InputError(f"light {light}: a unit direction with z >= 0 is needed")
+        field = self.field
+        if self._predictor is None:
+            self.status = "choosing the method by held-out error (every fast rung, two folds)"
+            choice = choose_light_rung(field, fast=True)
+            self.method = choice.describe()
+            self.status = f"fitting {self.method} on every light"
+            self._predictor = choice.predictor(field)
+            seen = field.visibility[0]
+            rti = field.provenance.get("source") == "rti"
+            self._scale = 1.0 if rti else display_scale(field.camera_slab(0)[:, seen])
+            self.status = "ready"
+        direction = camera_to_rig(np.array([light], dtype=np.float64), field.cameras[0])
+        values = self._predictor.predict(0, direction)[0]
+        assert field.image_shape is not None
+        image = np.asarray(values, dtype=np.float32).reshape(*field.image_shape, 3)
+        _, png = encode_picture(display_8bit(image, self._scale), ".png")
+        return png

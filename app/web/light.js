@@ -78,12 +78,14 @@ const lightView = (() => {
     gl: null, program: null, uniforms: {}, info: null, models: {}, model: null,
     light: [0, 0, 1], view: { scale: 1, x: 0, y: 0 }, mode: 0,
     specular: [0.6, 0.5, 40], normals: null, tiles: new Map(), frames: 0, drawn: 0,
+    server: { texture: null, shown: null, busy: null, ms: 0, error: null },
     pending: false, ready: false,
   };
 
   // --- the bases: the project's (processing.sample_models), in the viewer's order --------
   function weights(type, light) {
     const [x, y, z] = light;
+    if (type === "image") return [1];
     if (type === "ptm") return [1, x, y, x * x, x * y, y * y];
     let phi = Math.atan2(y, x);
     if (phi < 0) phi += 2 * Math.PI;
@@ -175,26 +177,71 @@ const lightView = (() => {
     const tile = { texture: null, used: state.frames };
     state.tiles.set(key, tile);
     Promise.all(tileUrls(model, level, col, row).map(loadImage)).then((images) => {
-      const gl = state.gl;
       const { outer } = tileSpans(model, level, col, row);
-      const [w, h] = [outer[2] - outer[0], outer[3] - outer[1]];
-      const texture = gl.createTexture();
-      gl.bindTexture(gl.TEXTURE_2D_ARRAY, texture);
-      gl.texStorage3D(gl.TEXTURE_2D_ARRAY, 1, gl.RGBA8, w, h, images.length);
-      gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
-      gl.pixelStorei(gl.UNPACK_COLORSPACE_CONVERSION_WEBGL, gl.NONE);
-      images.forEach((img, j) => {
-        gl.texSubImage3D(gl.TEXTURE_2D_ARRAY, 0, 0, 0, j, w, h, 1, gl.RGBA, gl.UNSIGNED_BYTE, img);
-      });
-      for (const [p, v] of [[gl.TEXTURE_MIN_FILTER, gl.LINEAR], [gl.TEXTURE_MAG_FILTER, gl.LINEAR],
-        [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE], [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE]]) {
-        gl.texParameteri(gl.TEXTURE_2D_ARRAY, p, v);
-      }
-      tile.texture = texture;
-      tile.size = [w, h];
+      tile.size = [outer[2] - outer[0], outer[3] - outer[1]];
+      tile.texture = planeTexture(images, ...tile.size);
       redraw();
     }, (error) => { tile.failed = String(error); status(String(error.message || error)); });
     return tile;
+  }
+
+  // A texture array of a tile's plane images (layer j: plane_j), bytes as they are.
+  function planeTexture(images, w, h) {
+    const gl = state.gl;
+    const texture = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D_ARRAY, texture);
+    gl.texStorage3D(gl.TEXTURE_2D_ARRAY, 1, gl.RGBA8, w, h, images.length);
+    gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
+    gl.pixelStorei(gl.UNPACK_COLORSPACE_CONVERSION_WEBGL, gl.NONE);
+    images.forEach((img, j) => {
+      gl.texSubImage3D(gl.TEXTURE_2D_ARRAY, 0, 0, 0, j, w, h, 1, gl.RGBA, gl.UNSIGNED_BYTE, img);
+    });
+    for (const [p, v] of [[gl.TEXTURE_MIN_FILTER, gl.LINEAR], [gl.TEXTURE_MAG_FILTER, gl.LINEAR],
+      [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE], [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE]]) {
+      gl.texParameteri(gl.TEXTURE_2D_ARRAY, p, v);
+    }
+    return texture;
+  }
+
+  // The chosen method, relit by the server: one picture per light, one request at a time
+  // (a drag asks for the latest light once the picture under way arrives); the last picture
+  // stays on screen meanwhile.
+  function serverPicture(model) {
+    const wanted = state.light.join(",");
+    const held = state.server;
+    if (held.shown !== wanted && !held.busy) {
+      held.busy = wanted;
+      const [x, y, z] = state.light;
+      const started = performance.now();
+      loadImage(`api/light/chosen.png?x=${x}&y=${y}&z=${z}`).then((img) => {
+        if (held.texture) state.gl.deleteTexture(held.texture);
+        held.texture = planeTexture([img], img.width, img.height);
+        held.shown = held.busy;
+        held.ms = performance.now() - started;
+        held.busy = null;
+        redraw();
+      }, async () => {
+        // The server says why (its choice failed, the image is too large): show it.
+        const response = await fetch(`api/light/chosen.png?x=${x}&y=${y}&z=${z}`);
+        held.busy = null;
+        held.error = (await response.json().catch(() => ({}))).error || "the server failed";
+        status(held.error);
+      });
+    }
+    return held.shown === wanted ? 0 : 1;
+  }
+
+  function drawServer(model) {
+    const gl = state.gl;
+    const u = state.uniforms;
+    const missing = serverPicture(model);
+    if (!state.server.texture) return missing;
+    gl.activeTexture(gl.TEXTURE0);
+    gl.bindTexture(gl.TEXTURE_2D_ARRAY, state.server.texture);
+    gl.uniform4f(u.rect, 0, 0, model.info.width, model.info.height);
+    gl.uniform4f(u.uvRect, 0, 0, 1, 1);
+    gl.drawArrays(gl.TRIANGLE_STRIP, 0, 4);
+    return missing;
   }
 
   function evict() {
@@ -300,6 +347,7 @@ const lightView = (() => {
     // The part of the image in view (image pixels).
     const bounds = [-view.x / view.scale, -view.y / view.scale,
       (width - view.x) / view.scale, (height - view.y) / view.scale];
+    if (model.server) return drawServer(model);
     const level = finest ? model.levels.length - 1 : levelFor(model, view.scale);
     let missing = 0;
     if (level > 0) drawTiles(model, 0, bounds, width, height, view);  // under it, while loading
@@ -339,8 +387,29 @@ const lightView = (() => {
     $("light-angles").textContent = `azimuth ${azimuth.toFixed(1)}°, elevation ${elevation.toFixed(1)}°`;
     const zoom = state.view.scale >= 1 ? `×${state.view.scale.toFixed(1)}` : `1/${(1 / state.view.scale).toFixed(1)}`;
     const loading = missing ? `, loading ${missing} tile${missing > 1 ? "s" : ""}` : "";
-    status(`${state.model.name.toUpperCase()} on the GPU — ${ms.toFixed(1)} ms a frame, zoom ${zoom}${loading}`);
+    if (state.model.server) {
+      const held = state.server;
+      const waiting = held.busy ? " — relighting on the server…" : "";
+      const method = state.chosenMethod ? `${state.chosenMethod}, ` : "";
+      status(`the chosen method (${method}server: ${held.ms.toFixed(0)} ms a light)${waiting}, zoom ${zoom}`);
+      if (held.busy && !state.chosenMethod) pollChosen();
+    } else {
+      status(`${state.model.name.toUpperCase()} on the GPU — ${ms.toFixed(1)} ms a frame, zoom ${zoom}${loading}`);
+    }
     drawPad();
+  }
+
+  // While the server chooses the method (the first light), say what it is doing.
+  async function pollChosen() {
+    if (state.polling) return;
+    state.polling = true;
+    while (state.server.busy && !state.chosenMethod) {
+      const chosen = (await (await fetch("api/light")).json()).chosen;
+      if (chosen.method) state.chosenMethod = chosen.method;
+      else status(`server: ${chosen.status}…`);
+      await new Promise((r) => setTimeout(r, 500));
+    }
+    state.polling = false;
   }
 
   function setLight(x, y) {
@@ -490,6 +559,16 @@ const lightView = (() => {
         value: name, textContent: `${name.toUpperCase()} fit`,
         title: `quantised to 8 bits: ${described.models[name].rms_error} levels RMS at the measured lights`,
       })));
+    const chosen = described.chosen;
+    const info = { width: described.width, height: described.height, nplanes: 3 };
+    state.models.chosen = {
+      name: "chosen", type: "image", info, images: 1, server: true, levels: [[info.width, info.height]],
+      scale: new Float32Array(MAX_TERMS * 3).fill(1), bias: new Float32Array(MAX_TERMS * 3),
+    };
+    select.append(Object.assign(document.createElement("option"), {
+      value: "chosen", textContent: "the chosen method (server)", disabled: Boolean(chosen.unavailable),
+      title: chosen.unavailable || "the method rig relight --lights chooses by held-out error, relit on the server for each light (the first light waits for the choice)",
+    }));
     state.model = state.models[select.value];
     const normals = await loadImage(described.normals).catch(() => null);
     state.normals = gl.createTexture();

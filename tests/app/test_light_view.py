@@ -9,6 +9,7 @@ Screenshots are kept in ``test-artifacts/light-view/``.
 from __future__ import annotations
 
 import json
+import urllib.error
 import urllib.request
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -221,3 +222,36 @@ def test_deep_zoom_tiles_draw_the_same_image(
     # overlap only feeds filtering across a seam).
     difference = np.abs(pictures[True].astype(np.int16) - pictures[False].astype(np.int16))
     assert difference.max() <= 1, difference.max()
+
+
+def test_the_chosen_method_is_relit_by_the_server(browser: Any, tmp_path: Path) -> None:
+    field = _sphere_field(tmp_path / "sphere.zarr", size=32)
+    server = _serve(field, tmp_path / "sphere.zarr")
+    try:
+        page, errors = _open_page(browser, server.url)
+        page.select_option("#light-model", "chosen")
+        before = page.evaluate("() => Number(document.body.dataset.lightFrame)")
+        page.evaluate("() => lightView.setLight(0.4, -0.2)")
+        page.wait_for_function(
+            f"() => Number(document.body.dataset.lightFrame) > {before}", timeout=600_000
+        )
+        light = page.evaluate("() => lightView.state.light")
+        shown = _snapshot(page)
+        page.screenshot(path=str(FOLDER / "sphere-chosen.png"))
+        assert "server" in page.inner_text("#light-status")
+        method = json.loads(urllib.request.urlopen(server.url + "api/light").read())["chosen"]
+        assert method["status"] == "ready" and method["method"]
+        # What the server computes for that light, made here anew: the same choice, the same
+        # picture, drawn by the page byte for byte.
+        png = light_view.ChosenLight(field).picture(tuple(light))
+        expected = np.asarray(cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR))
+        expected = expected[:, :, ::-1]
+        assert np.array_equal(shown, expected)
+        bad = urllib.request.Request(server.url + "api/light/chosen.png?x=2&y=0&z=0")
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(bad)
+        assert refused.value.code == 400 and "unit direction" in refused.value.read().decode()
+        assert errors == []
+        page.close()
+    finally:
+        _off_the_loop(server.stop)
