@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from core.errors import InputError, RigError
 from core.field_store import ReflectanceField
+from core.progress import ProgressEvent, reporting_to
 
 if TYPE_CHECKING:
     from render.web_export import WebModel
@@ -175,8 +176,14 @@ class ChosenLight:
             raise InputError(f"light {light}: a unit direction with z >= 0 is needed")
         field = self.field
         if self._predictor is None:
-            self.status = "choosing the method by held-out error (every fast rung, two folds)"
-            choice = choose_light_rung(field, fast=True)
+            what = "choosing the method by held-out error (every fast rung, two folds)"
+            self.status = what
+
+            def count(event: ProgressEvent) -> None:
+                self.status = what if event.finished else f"{what}: {event}"
+
+            with reporting_to(count):
+                choice = choose_light_rung(field, fast=True)
             self.method = choice.describe()
             self.status = f"fitting {self.method} on every light"
             self._predictor = choice.predictor(field)

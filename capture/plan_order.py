@@ -36,8 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
+from core.progress import progress_bar
 from rig.config import RigConfig
 from rig.pose import ROLES, RigPose
 from rig.safety import path_violation, pose_violation
@@ -531,8 +531,8 @@ def _build(
     else:
         camera_order = _camera_tour(config, cameras, builder.current)
     # A bar only when ordering takes a while (thousands of pairs, forbidden boxes to sample).
-    bar = tqdm(camera_order, desc=f"ordering ({ordering})", unit="camera", delay=1.0,
-               disable=not progress)  # fmt: skip
+    bar = progress_bar(camera_order, desc=f"ordering ({ordering})", unit="camera", delay=1.0,
+               show=progress)  # fmt: skip
     for position, c in enumerate(bar):
         if ordering == "serpentine":
             order = allowed[c] if position % 2 == 0 else allowed[c][::-1]

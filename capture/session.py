@@ -25,8 +25,6 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from tqdm import tqdm
-
 from capture.dataset import Dataset
 from capture.frame_files import frame_file
 from capture.journal import (
@@ -40,6 +38,7 @@ from capture.journal import (
 )
 from capture.plan import CaptureEvent, SweepPlan
 from core.errors import DatasetError, DeviceError, DeviceFault, RigError, SafetyError
+from core.progress import progress_bar
 from rig.config import RigConfig
 from rig.devices import Frame
 from rig.pose import RigPose
@@ -310,12 +309,12 @@ class CaptureSession:
         status: ExitStatus = "success"
         reason = ""
         taken = 0
-        bar = tqdm(
+        bar = progress_bar(
             total=already + len(pending),
             initial=already,
             desc="capture",
             unit="image",
-            disable=not self.progress,
+            show=self.progress,
         )
         try:
             if pending:

@@ -18,10 +18,9 @@ import time
 from collections.abc import Iterator, Sequence
 from typing import Any
 
-from tqdm import tqdm
-
 from core.errors import ClusterError, InputError
 from core.memory_budget import available_memory, format_size
+from core.progress import progress_bar
 
 __all__ = [
     "CONNECT_TIMEOUT_S",
@@ -127,7 +126,7 @@ def compute_each(
 
     futures = client.compute(list(tasks))
     index = {id(future): i for i, future in enumerate(futures)}
-    bar = tqdm(total=len(futures), desc=what, unit="task", disable=not progress)
+    bar = progress_bar(total=len(futures), desc=what, unit="task", show=progress)
     try:
         for future in as_completed(futures):
             value = future.result()

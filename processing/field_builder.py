@@ -33,7 +33,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from capture.dataset import Dataset
 from capture.journal import ImageKey
@@ -41,6 +40,7 @@ from core.camera_model import PinholeCamera, RigCamera
 from core.errors import DatasetError, InputError
 from core.field_store import FieldStoreWriter, SlabWriter
 from core.image_io import Transfer
+from core.progress import progress_bar
 from core.splat import CameraSplats, camera_splats, shown_points
 from processing.decode import DecodedImage, decode_image
 from processing.field_layout import CALIBRATION_KINDS, field_layout
@@ -177,7 +177,7 @@ def build_field(
     demosaic, transfer : passed to :func:`processing.decode.decode_image`
     light_model : dict, optional, the store's light model (default directional, unit intensity)
     provenance : mapping, optional, merged into the store's provenance
-    progress : bool, show a tqdm progress bar
+    progress : bool, show a progress bar on the terminal (:mod:`core.progress`)
     overwrite : bool, replace a store already at ``output`` (and the fit saved beside it)
     exclude : image keys to leave out, as if never taken (files found missing or corrupt)
     client : distributed.Client, optional
@@ -297,7 +297,7 @@ def _built_cameras(
 ) -> Iterator[CameraResult]:
     """Each camera's result as it is built: in turn here, or as Dask tasks finish."""
     if client is None:
-        for job in tqdm(jobs, desc="process", unit="camera", disable=not progress):
+        for job in progress_bar(jobs, desc="process", unit="camera", show=progress):
             yield job.build(cloud)
         return
     from dask.delayed import delayed

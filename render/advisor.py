@@ -37,11 +37,11 @@ from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
+from core.progress import progress_bar
 from processing.interpolation import InterpolationMethod, interpolation_weights
 from processing.panorama import Panorama
 from processing.sample_models import PARAMETRIC_MODELS, SampleModels, fit_sample_models
@@ -365,8 +365,8 @@ class Advisor:
             s_count, t_count, _ = self.part.shape
             light_held = _folds(t_count)
             camera_held = _folds(s_count) if self.views_tested else []
-            steps = tqdm(total=len(light_held) + len(camera_held), desc="hold-out fits",
-                         unit="fold", disable=not self.progress)  # fmt: skip
+            steps = progress_bar(total=len(light_held) + len(camera_held), desc="hold-out fits",
+                         unit="fold", show=self.progress)  # fmt: skip
             self._light_folds, self._camera_folds = [], []
             for held in light_held:
                 self._light_folds.append(self._fold(held, t_count, "lights"))
@@ -469,7 +469,7 @@ class Advisor:
         timed = set(cameras[:: max(len(cameras) // TIMING_VIEWS, 1)][:TIMING_VIEWS])
         reference: dict[str, list[tuple[NDArray[np.float32], NDArray[np.bool_]]]] = {}
         predictions = []
-        for candidate in tqdm(self.candidates, desc="candidates", disable=not self.progress):
+        for candidate in progress_bar(self.candidates, desc="candidates", show=self.progress):
             relit, prepare_ms, render_ms = _timed_radiance(
                 self._engine(candidate.mode), part, panorama, cameras, timed
             )

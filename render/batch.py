@@ -24,11 +24,11 @@ from typing import Any
 import numpy as np
 import zarr
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.field_store import ReflectanceField, is_field_store
+from core.progress import progress_bar
 from processing.panorama import read_panorama
 from processing.sample_model_store import read_sample_models
 from render.relight_mode import RelightMode, open_relighter
@@ -112,7 +112,7 @@ def relight_batch(
     try:
         indices = range(len(plan.panoramas))
         if client is None:
-            for index in tqdm(indices, desc="environments", unit="env", disable=not progress):
+            for index in progress_bar(indices, desc="environments", unit="env", show=progress):
                 relight_environment(plan, index, str(partial))
         else:
             from dask.delayed import delayed

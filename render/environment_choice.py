@@ -34,12 +34,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.directions import angle_between
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import grid_lights
+from core.progress import progress_bar
 from processing.image_quality import relative_rmse
 from processing.lights import disassemble_lights
 from processing.measured_region import MeasuredRegion
@@ -232,8 +232,8 @@ def choose_environment_mode(
     errors: dict[str, list[float]] = {name: [] for name in names}
     seconds = dict.fromkeys(names, 0.0)
     notes: dict[str, str] = {}
-    bar = tqdm(total=len(names) * len(splits), desc="choosing", unit="method",
-               disable=not progress)  # fmt: skip
+    bar = progress_bar(total=len(names) * len(splits), desc="choosing", unit="method",
+               show=progress)  # fmt: skip
     everything = np.arange(field.shape[1], dtype=np.int64)
     ratios = [_gap_ratio(field, panorama, split, below=i > 0) for i, split in enumerate(splits)]
     try:

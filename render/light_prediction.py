@@ -63,13 +63,13 @@ from typing import Literal, Protocol, get_args
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.camera_model import rig_to_camera
 from core.colour import linear_to_srgb, srgb_to_linear
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
+from core.progress import progress_bar
 from processing.interpolation import InterpolationMethod, interpolation_weights, mean_spacing_deg
 from processing.learned_rti import LearnedRTI, TrainingSettings, train_learned_rti
 from processing.sample_model_store import models_for_field
@@ -491,13 +491,12 @@ class _Learned:
         values = np.concatenate(parts, axis=1)
         if values.shape[1] == 0:
             raise InputError(f"{self.field.path}: no camera sees any sample; nothing to learn")
-        bar = tqdm(desc="training", unit="step", disable=not self.progress)
+        bar = progress_bar(desc="training", unit="step", show=self.progress)
 
         def advance(step: int, planned: int) -> None:
             # The steps foreseen change as training learns its pace (a time budget).
             if bar.total != planned:
-                bar.total = planned
-                bar.refresh()
+                bar.set_total(planned)
             bar.update(step - bar.n)
 
         try:

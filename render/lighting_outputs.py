@@ -5,10 +5,9 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from tqdm import tqdm
-
 from core.atomic import write_json_atomic
 from core.image_io import write_srgb8
+from core.progress import progress_bar
 from processing.environment import EnvironmentLighting, LightingControls, light_environment
 from processing.panorama import Panorama
 from render.overlay import disassembled_picture, sample_overlay
@@ -31,7 +30,7 @@ def write_lighting_outputs(
     ``progress`` shows the steps when they take more than a second (a first run compiles the
     numerical kernels, which are cached afterwards).
     """
-    steps = tqdm(total=3, desc="sample and gather", unit="step", delay=1.0, disable=not progress)
+    steps = progress_bar(total=3, desc="sample and gather", unit="step", delay=1.0, show=progress)
     with steps:
         lighting = light_environment(panorama, controls)
         out = Path(directory)

@@ -35,12 +35,12 @@ from typing import Any
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.colour import linear_to_srgb
 from core.directions import angle_between
 from core.errors import InputError
 from core.field_store import ReflectanceField
+from core.progress import ProgressBar, progress_bar
 from processing.image_quality import display_scale
 from processing.measured_region import MeasuredRegion
 from render.light_prediction import LightPredictor, MixturePredictor, make_predictor
@@ -230,8 +230,8 @@ def choose_light_rung(
     trials: dict[str, _Trial] = {}
     seconds = dict.fromkeys(names, 0.0)
     notes: dict[str, str] = {}
-    bar = tqdm(total=len(names) * (len(folds) + 1), desc="choosing", unit="fit",
-               disable=not progress)  # fmt: skip
+    bar = progress_bar(total=len(names) * (len(folds) + 1), desc="choosing", unit="fit",
+               show=progress)  # fmt: skip
     try:
         for name in names:
             start = time.perf_counter()
@@ -283,7 +283,7 @@ def _trial(
     truths: list[NDArray[np.float32]],
     scale: float,
     keep: bool,
-    bar: tqdm[Any],
+    bar: ProgressBar,
 ) -> _Trial:
     seen = field.visibility[0]
 

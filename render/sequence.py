@@ -11,10 +11,10 @@ from typing import Literal, get_args
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.camera_model import PinholeCamera
 from core.errors import InputError
+from core.progress import progress_bar
 from processing.panorama import Panorama
 from render.output import display_picture
 from render.relight_mode import RelightEngine
@@ -70,7 +70,7 @@ def relight_sequence(
     else:
         engine.set_lighting(panorama, yaw_deg=yaw_deg, exposure=exposure, modulation=modulation)
     pictures = []
-    for frame in tqdm(range(frames), desc="frames", unit="frame", disable=not progress):
+    for frame in progress_bar(range(frames), desc="frames", unit="frame", show=progress):
         step = 360.0 * frame / frames
         if kind == "environment":
             engine.set_lighting(

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.camera_model import PinholeCamera
 from core.directions import angles_deg_from_direction, hemisphere_layout
 from core.field_store import SAMPLE_CHUNK, FieldStoreWriter
+from core.progress import progress_bar
 from sim.scenes import build_scene, get_scene
 from sim.synthetic_camera import (
     DirectionalLight,
@@ -94,7 +94,7 @@ def simulate_field(
         for s, camera in enumerate(cameras):
             store.write_visibility(s, camera_visibility(samples, camera))
         total = len(light_directions) * len(cameras)
-        steps = tqdm(total=total, desc="field", unit="slab", disable=not progress)
+        steps = progress_bar(total=total, desc="field", unit="slab", show=progress)
         for t, direction in enumerate(light_directions):
             toward = (float(direction[0]), float(direction[1]), float(direction[2]))
             light = DirectionalLight(toward)

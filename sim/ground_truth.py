@@ -23,11 +23,11 @@ from typing import Any
 import numba
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.brdf import specular_lobe
 from core.camera_model import PinholeCamera
 from core.light_set import LightSet, grid_lights
+from core.progress import progress_bar
 from sim.scenes import SurfaceSamples, build_scene, get_scene
 from sim.synthetic_camera import DirectionalLight, SyntheticImage, image_of_points, light_visibility
 
@@ -85,7 +85,7 @@ def shade_environment_views(
         samples.alpha.astype(np.float64),
     )
     starts = range(0, len(directions), CHUNK)
-    for start in tqdm(starts, desc="shading", unit="chunk", disable=not progress):
+    for start in progress_bar(starts, desc="shading", unit="chunk", show=progress):
         chunk = slice(start, start + CHUNK)
         if shadows:
             visible = np.stack(

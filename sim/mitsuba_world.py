@@ -33,12 +33,12 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.camera_model import PinholeCamera
 from core.directions import hemisphere_layout
 from core.errors import InputError
 from core.field_store import FieldStoreWriter, is_field_store
+from core.progress import progress_bar
 from sim.mitsuba_reference import DEFAULT_VARIANT, load_mitsuba
 from sim.world_files import WORLDS, World, load_world
 from sim.world_render import SAMPLER, WorldImage, WorldRenderer, render_environment_image
@@ -263,7 +263,7 @@ def render_world_field(
             "created": datetime.now(UTC).isoformat(timespec="seconds"),
         },
     )
-    steps = tqdm(total=count, desc="world field", unit="image", disable=not progress)
+    steps = progress_bar(total=count, desc="world field", unit="image", show=progress)
     try:
         for s, camera in enumerate(cameras):
             renderer = renderer_for(camera)

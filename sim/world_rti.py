@@ -13,11 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.camera_model import PinholeCamera
 from core.directions import hemisphere_layout
 from core.errors import InputError
+from core.progress import progress_bar
 from sim.mitsuba_world import DEFAULT_FIELD_SPP, DEFAULT_MAX_DEPTH, World, load_world
 from sim.world_render import WorldRenderer
 
@@ -95,7 +95,7 @@ def render_world_rti(
     renderer = WorldRenderer(scene, camera, spp=spp, max_depth=max_depth)
     images = np.zeros((len(directions), height, width, 3), dtype=np.float32)
     alpha = np.zeros((height, width), dtype=np.float32)
-    steps = tqdm(directions, desc="rti", unit="image", disable=not progress)
+    steps = progress_bar(directions, desc="rti", unit="image", show=progress)
     for t, toward in enumerate(steps):
         image = renderer.render(toward, seed=(seed * 100_003 + t) % 2**32)
         images[t] = image.rgb
