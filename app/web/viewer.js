@@ -13,7 +13,24 @@ function send(changes) {
   if (socket && socket.readyState === WebSocket.OPEN) {
     state.sentAt = performance.now();
     socket.send(JSON.stringify({ controls: changes }));
+    waitForFrame();
   }
+}
+
+// Never "live" while a frame is awaited: a first frame in a new mode opens its engine (the
+// paper's sampling, a model's precomputation) and can take seconds; the status counts them.
+function waitForFrame() {
+  if (state.waiting) return;
+  state.waiting = setInterval(() => {
+    const seconds = (performance.now() - state.sentAt) / 1000;
+    if (seconds > 0.5) $("status").textContent = `rendering… (${seconds.toFixed(0)} s)`;
+  }, 250);
+}
+
+function frameArrived() {
+  clearInterval(state.waiting);
+  state.waiting = null;
+  $("status").textContent = "live";
 }
 
 function wrapDegrees(value) {
@@ -112,7 +129,7 @@ function onMessage(event) {
     showControls(message.controls);
     $("notes").replaceChildren(...message.notes.map((n) => Object.assign(
       document.createElement("p"), { textContent: n })));
-    $("status").textContent = "live";
+    frameArrived();
     if (!message.controls.truth) {
       $("truth-figure").hidden = $("error-figure").hidden = true;
     }
@@ -127,6 +144,8 @@ function onMessage(event) {
   } else if (message.type === "truth") {
     $("truth-error").textContent = `relative RMSE ${(100 * message.relative_rmse).toFixed(2)} %`;
   } else if (message.type === "error") {
+    clearInterval(state.waiting);
+    state.waiting = null;
     $("status").textContent = `error: ${message.message}`;
   }
 }
