@@ -8,9 +8,13 @@ This module and :mod:`app.demo` are the application layer: they may import every
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from types import FrameType
 
 from app.cli_advise import add_advise
 from app.cli_args import (
@@ -28,9 +32,8 @@ from app.cli_batch import add_batch
 from app.cli_bench import add_bench_parser
 from app.cli_calibrate import add_calibrate
 from app.cli_capture import add_capture
-from app.cli_evaluate import (
-    add_evaluate,
-)
+from app.cli_choices import SAMPLERS
+from app.cli_evaluate import add_evaluate
 from app.cli_export import add_export_web
 from app.cli_fit import add_fit
 from app.cli_plan import add_plan
@@ -44,8 +47,6 @@ __all__ = ["build_parser", "main"]
 
 
 def _add_sample(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from processing.sampling import SAMPLERS
-
     p = commands.add_parser(
         "sample",
         help="importance-sample a panorama and disassemble its light into K lights",
@@ -455,21 +456,59 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``rig`` console script; returns the exit status.
 
     A bad argument is refused by argparse (its message, status 2) and returned as the
-    status, like every other refusal, rather than leaving by ``SystemExit``.
+    status, like every other refusal, rather than leaving by ``SystemExit``. Ctrl-C and
+    SIGTERM both unwind the command (see :func:`_unwind_on_sigterm`): what it created is
+    removed, a line on stderr says it was stopped, and the status is the shell's convention,
+    128 + the signal's number (130, 143), unless the command handles the stop itself (``rig
+    view``, ``rig capture``) and returns its own.
     """
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as leaving:  # argparse's error (2) and --help (0)
         return leaving.code if isinstance(leaving.code, int) else 2
-    try:
-        status: int = args.handler(args)
-    except RigError as error:
-        print(f"rig {args.command}: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"rig {args.command}: interrupted", file=sys.stderr)
-        return 130
+    with _unwind_on_sigterm() as received:
+        try:
+            status: int = args.handler(args)
+        except RigError as error:
+            print(f"rig {args.command}: error: {error}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            number = received[-1] if received else signal.SIGINT
+            word = "terminated" if number == signal.SIGTERM else "interrupted"
+            print(f"rig {args.command}: {word}", file=sys.stderr)
+            return 128 + number
     return status
+
+
+@contextlib.contextmanager
+def _unwind_on_sigterm() -> Iterator[list[int]]:
+    """SIGTERM raises :class:`KeyboardInterrupt` in the main thread while the block runs.
+
+    By default SIGTERM ends the process where it stands: no ``finally`` or ``with`` runs, so
+    a temporary field store (an RTI capture's import), the viewer's uploads or a half-written
+    output would stay behind. Raised as Ctrl-C is, it unwinds through the same cleanups and
+    the same ``except KeyboardInterrupt`` of the commands that catch it. Yields the list the
+    signals received are appended to, so the caller can tell SIGTERM from Ctrl-C. Another
+    SIGTERM during that unwinding is ignored: a supervisor repeating its request must not cut
+    the cleanup short (SIGKILL is the way to not wait).
+    """
+    received: list[int] = []
+
+    def terminate(number: int, frame: FrameType | None) -> None:
+        received.append(number)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise KeyboardInterrupt
+
+    if threading.current_thread() is not threading.main_thread():
+        # A signal handler can only be set from the main thread (a test calling main()
+        # from a worker): SIGTERM keeps its default there.
+        yield received
+        return
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield received
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

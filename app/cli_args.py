@@ -20,6 +20,7 @@ from core.errors import InputError
 from core.memory_budget import available_memory, parse_size
 
 __all__ = [
+    "DEFAULT_VIEW_SIZE",
     "IMAGE_BYTES_PER_PIXEL",
     "MAX_IMAGE_SIDE",
     "add_camera_options",
@@ -34,6 +35,7 @@ __all__ = [
     "positive",
     "quality",
     "require_output",
+    "resampled_size",
     "squares",
     "whole",
 ]
@@ -253,10 +255,47 @@ def cluster_for(args: argparse.Namespace) -> AbstractContextManager[Any]:
     return dask_client(args.dask, workers=args.workers, memory_limit=args.worker_memory)
 
 
-def add_camera_options(p: argparse.ArgumentParser) -> None:
-    """Camera flags shared by every command that renders a view (same defaults everywhere)."""
+#: The view size of the commands that render one (``--size``).
+DEFAULT_VIEW_SIZE = (512, 512)
+
+
+def add_camera_options(p: argparse.ArgumentParser, *, size_help: str | None = None) -> None:
+    """Camera flags shared by every command that renders a view (same defaults everywhere).
+
+    ``size_help``: ``--size`` has no default (None) and this help, for a command that also
+    renders what has a size of its own (a field of pixels) and must tell a size asked for
+    from none; it takes :data:`DEFAULT_VIEW_SIZE` otherwise.
+    """
     p.add_argument("--distance", type=positive, default=4.0, help="camera distance (default 4)")
     p.add_argument("--fov", type=positive, default=40.0, help="horizontal field of view, degrees")
+    if size_help is not None:
+        p.add_argument("--size", type=image_size, help=size_help)
+        return
     p.add_argument(
-        "--size", type=image_size, default=(512, 512), help="image WIDTHxHEIGHT (512x512)"
+        "--size", type=image_size, default=DEFAULT_VIEW_SIZE, help="image WIDTHxHEIGHT (512x512)"
     )
+
+
+def resampled_size(
+    requested: tuple[int, int] | None, native: tuple[int, int], what: str
+) -> tuple[int, int] | None:
+    """The ``--size`` (width, height) an image of ``native`` (width, height) is resampled to.
+
+    None when no size was asked for or it is the native one. A size of other proportions
+    is refused (InputError naming the ones that keep them, to within a pixel): stretching
+    the picture is never what was meant. ``what`` names the image in the message.
+    """
+    if requested is None or requested == native:
+        return None
+    width, height = requested
+    own_width, own_height = native
+    # Off by at most one pixel on either side: the rounding of a scaled size.
+    if abs(width * own_height - height * own_width) > max(own_width, own_height):
+        keep_width = f"{width}x{max(1, round(width * own_height / own_width))}"
+        keep_height = f"{max(1, round(height * own_width / own_height))}x{height}"
+        raise InputError(
+            f"--size {width}x{height}: {what} is {own_width}x{own_height}, of other "
+            f"proportions; give a size that keeps them ({keep_width} or {keep_height}), or "
+            "drop --size for its own"
+        )
+    return width, height

@@ -22,15 +22,17 @@ from app.cli_args import (
     output_directory,
     positive,
 )
+from app.cli_choices import SEQUENCES
 from core.errors import InputError
 
 __all__ = ["add_batch"]
 
+#: The view size of a field of points' frames (``--size``).
+BATCH_VIEW_SIZE = (256, 256)
+
 
 def add_batch(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``rig batch FIELD --env ... -o OUT.zarr`` on the ``rig`` sub-command parser."""
-    from render.sequence import SEQUENCES
-
     p = commands.add_parser(
         "batch",
         help="relight a sequence for each of many panoramas into one Zarr store (--dask)",
@@ -47,7 +49,8 @@ def add_batch(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     p.add_argument("--view", type=angles, help="first view AZ,INCL in degrees (fields of points)")
     p.add_argument("--distance", type=positive, default=4.0, help="camera distance (default 4)")
     p.add_argument("--fov", type=positive, default=40.0, help="field of view, degrees")
-    p.add_argument("--size", type=image_size, default=(256, 256), help="WxH (default 256x256)")
+    p.add_argument("--size", type=image_size, help="WxH of a field of points' frames (default "
+                   "256x256); a field of pixels is relit at its capture's size")  # fmt: skip
     p.add_argument("--sequence", choices=SEQUENCES, default="turntable")
     p.add_argument("--frames", type=count, default=24, help="frames per environment")
     p.add_argument("--paper", action="store_true", help="the paper's configuration")
@@ -80,10 +83,21 @@ def _run_batch(args: argparse.Namespace) -> int:
             raise InputError(f"{args.field} holds one fixed view: drop --view, use "
                              "--sequence environment")  # fmt: skip
         camera = field.cameras[0]
+        assert field.image_shape is not None  # every field of pixels has its image's shape
+        height, width = field.image_shape
+        if args.size is not None and args.size != (width, height):
+            # The frames are made in the batch's tasks at the capture's pixels; resampling
+            # them is rig relight's (one sequence), not done here.
+            raise InputError(
+                f"--size {args.size[0]}x{args.size[1]}: {args.field} is a field of pixels, "
+                f"relit at its capture's size ({width}x{height}); drop --size "
+                "(rig relight --size resamples a relit image or sequence)"
+            )
     else:
         if args.view is None:
             raise InputError(f"--view AZ,INCL is needed to render the points of {args.field}")
-        camera = PinholeCamera(args.view[0], args.view[1], args.distance, args.fov, *args.size)
+        camera = PinholeCamera(args.view[0], args.view[1], args.distance, args.fov,
+                               *(args.size or BATCH_VIEW_SIZE))  # fmt: skip
     started = time.perf_counter()
     with cluster_for(args) as client:
         models_path = None

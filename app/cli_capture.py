@@ -9,9 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from app.cli_args import count, image_size, output_directory, positive
-from capture.calibration_plan import with_calibration_captures
 from core.errors import InputError
-from sim.simulated_rig import simulated_capture_config
 
 __all__ = ["add_capture", "console_fault_handler", "console_placer"]
 
@@ -34,7 +32,7 @@ def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
         description="Run a capture: --config and --plan on a rig; --sim with a grid plan on the "
         "simulated rig started in this process; --resume DATASET continues a stopped capture "
         "(files already taken are verified by checksum, missing or corrupt ones re-taken). "
-        "Ctrl-C finishes the current image, parks and stops with status paused.",
+        "Ctrl-C (or SIGTERM) finishes the current image, parks and stops with status paused.",
     )
     p.add_argument("-o", "--output", type=output_directory, help="new dataset directory")
     p.add_argument("--resume", type=Path, metavar="DATASET", help="continue this dataset")
@@ -107,12 +105,14 @@ def console_placer(name: str | None) -> None:
 
 
 def _run_capture(args: argparse.Namespace) -> int:
+    from capture.calibration_plan import with_calibration_captures
     from capture.dataset import Dataset
     from capture.grid_plan import grid_plan
     from capture.plan import SweepPlan
     from capture.plan_file import load_plan
     from capture.session import require_same_rig
     from rig.config import load_config, parse_config
+    from sim.simulated_rig import simulated_capture_config
 
     if args.resume is not None:
         if args.output is not None or args.plan is not None:
@@ -216,18 +216,23 @@ def _capture(config: Any, dataset: Any, plan: Any, *, progress: bool) -> Any:
         session = CaptureSession(
             rig, dataset, plan, progress=progress, targets=placer, on_fault=handler
         )
-        previous = signal.getsignal(signal.SIGINT)
+        stops = (signal.SIGINT, signal.SIGTERM)
+        previous = {number: signal.getsignal(number) for number in stops}
 
-        def on_interrupt(number: int, frame: Any) -> None:
-            # First Ctrl-C: finish the image and park; a second one interrupts at once.
+        def on_stop(number: int, frame: Any) -> None:
+            # First Ctrl-C or SIGTERM: finish the image and park (the dataset resumes where it
+            # stopped); a second one interrupts at once, through rig's own handlers.
             session.request_pause()
             signal.signal(signal.SIGINT, signal.default_int_handler)
+            signal.signal(signal.SIGTERM, previous[signal.SIGTERM])
 
-        signal.signal(signal.SIGINT, on_interrupt)
+        for number in stops:
+            signal.signal(number, on_stop)
         try:
             return session.run()
         finally:
-            signal.signal(signal.SIGINT, previous)
+            for number, before in previous.items():
+                signal.signal(number, before)
 
 
 def _run_verify(args: argparse.Namespace) -> int:

@@ -12,10 +12,25 @@ import math
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import add_dask_options, cluster_for, names_among, output_file, require_output
+from app.cli_args import (
+    add_dask_options,
+    cluster_for,
+    names_among,
+    output_file,
+    require_output,
+    resampled_size,
+)
+from app.cli_choices import CHOSEN, PREDICTORS, SPLITS
 from core.errors import InputError
 
-__all__ = ["add_below_horizon_option", "add_evaluate", "add_transfer_option", "relight_lights"]
+__all__ = [
+    "add_below_horizon_option",
+    "add_evaluate",
+    "add_transfer_option",
+    "relight_lights",
+    "resample",
+    "say_resampled",
+]
 
 
 def add_transfer_option(p: argparse.ArgumentParser) -> None:
@@ -44,9 +59,6 @@ def add_below_horizon_option(p: argparse.ArgumentParser) -> None:
 
 def add_evaluate(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``rig evaluate`` on the ``rig`` sub-command parser."""
-    from render.light_prediction import PREDICTORS
-    from render.light_splits import SPLITS
-
     p = commands.add_parser(
         "evaluate",
         help="score every relighting method on held-out lights (PSNR, SSIM, dE2000, RMSE)",
@@ -80,9 +92,6 @@ def add_evaluate(commands: argparse._SubParsersAction[argparse.ArgumentParser]) 
 
 
 def _methods(text: str) -> tuple[str, ...]:
-    from render.evaluation import CHOSEN
-    from render.light_prediction import PREDICTORS
-
     return names_among(text, (*PREDICTORS, *CHOSEN), "method")
 
 
@@ -105,30 +114,26 @@ def _read_mask(path: Path, shape: tuple[int, int] | None) -> Any:
 
 def _run_evaluate(args: argparse.Namespace) -> int:
     from core.atomic import atomic_path, write_json_atomic
-    from core.field_store import ReflectanceField, is_field_store
     from processing.rti import open_field_or_rti
-    from render.evaluation import evaluate, test_field_from_lp
-    from render.light_splits import split_lights
+    from render.evaluation import against_test, evaluate, held_out_split
 
     with open_field_or_rti(args.field, progress=not args.quiet, transfer=args.transfer) as field:
         mask = None if args.mask is None else _read_mask(args.mask, field.image_shape)
+        # In memory: the field's lights split, or the test capture; a large view as tiles of
+        # it, read band by band (render.evaluation.pixel_sample), never whole.
         if args.split is not None:
-            fit_index, test_index = split_lights(field, args.split)
-            fit, test = field.subset(lights=fit_index), field.subset(lights=test_index)
-            names = [f"light {int(t)}" for t in test_index]
+            pair = held_out_split(field, args.split, mask)
+            assert pair.test_lights is not None
+            names: list[str] | None = [f"light {int(t)}" for t in pair.test_lights]
             where = f"split {args.split}"
         else:
-            fit, names, where = field, None, str(args.test)
-            if is_field_store(args.test):
-                test = ReflectanceField.open(args.test)
-            elif args.test.suffix.lower() == ".lp":
-                test = test_field_from_lp(args.test, transfer=args.transfer)
-                names = _lp_names(args.test)
-            else:
-                raise InputError(f"{args.test}: give an .lp file or a field store")
+            pair = against_test(field, args.test, mask, transfer=args.transfer)
+            names = _lp_names(args.test) if args.test.suffix.lower() == ".lp" else None
+            where = str(args.test)
         with cluster_for(args) as client:
-            result = evaluate(fit, test, args.methods, mask=mask, test_names=names,
-                              progress=not args.quiet, client=client)  # fmt: skip
+            result = evaluate(pair.fit, pair.test, args.methods, mask=pair.mask,
+                              test_names=names, progress=not args.quiet, client=client,
+                              sample=pair.sample)  # fmt: skip
     result = dataclasses.replace(result, field=str(args.field), test=where)
     table = result.markdown()
     print(table, end="")
@@ -176,7 +181,11 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
         camera = args.camera
         if not 0 <= camera < field.shape[0]:
             raise InputError(f"--camera {camera}: {args.field} has cameras 0..{field.shape[0] - 1}")
-    directions = camera_to_rig(lights.directions, field.cameras[camera])
+    view = field.cameras[camera]
+    resample_to = resampled_size(
+        args.size, (view.width, view.height), f"the view of camera {camera} of {args.field}"
+    )
+    directions = camera_to_rig(lights.directions, view)
     # The light-stage sum's image under one light is the nearest measured image.
     method = "nearest" if args.method == "light-stage" else args.method
     if method == "auto":
@@ -198,13 +207,42 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
         else display_scale(field.camera_slab(camera)[:, field.visibility[camera]])
     )
     views = _image_maker(field, camera)
+    if resample_to is not None:
+        say_resampled((view.width, view.height), resample_to)
     for stem, values in zip(stems, predicted, strict=True):
         image = views(values)
+        if resample_to is not None:
+            image = resample(np.asarray(image, dtype=np.float32), resample_to)
         write_srgb8(stem.with_suffix(".png"), display_8bit(image, scale))
         if args.exr:
             write_exr(stem.with_suffix(".exr"), np.asarray(image, dtype=np.float32))
     print(f"{len(lights)} images under {args.lights} ({method}) -> {directory}/")
     return 0
+
+
+def resample(image: Any, size: tuple[int, int]) -> Any:
+    """``image`` (H, W) or (H, W, C) resampled to ``size`` (width, height).
+
+    Area averages when it shrinks, bilinear when it grows: neither overshoots, so linear
+    radiance stays non-negative and a tone-mapped frame keeps its range. A boolean mask (the
+    coverage) stays one: covered where at least half of it was.
+    """
+    import cv2
+    import numpy as np
+
+    shrinks = size[0] * size[1] < image.shape[0] * image.shape[1]
+    interpolation = cv2.INTER_AREA if shrinks else cv2.INTER_LINEAR
+    if image.dtype == np.bool_:
+        return cv2.resize(image.astype(np.float32), size, interpolation=interpolation) >= 0.5
+    return cv2.resize(np.ascontiguousarray(image), size, interpolation=interpolation)
+
+
+def say_resampled(native: tuple[int, int], size: tuple[int, int]) -> None:
+    """Print that a view relit at its ``native`` size (width, height) is resampled to ``size``."""
+    print(
+        f"note: relit at the captured view's own size, {native[0]}x{native[1]} pixels, and "
+        f"resampled to {size[0]}x{size[1]} (--size)"
+    )
 
 
 def _entry_stem(directory: Path, name: str, lp: Path) -> Path:

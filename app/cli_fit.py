@@ -19,14 +19,13 @@ from app.cli_args import (
     names_among,
     output_file,
 )
+from app.cli_choices import MODELS
 
 __all__ = ["add_fit"]
 
 
 def add_fit(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``rig fit FIELD`` on the ``rig`` sub-command parser."""
-    from processing.sample_models import MODELS
-
     p = commands.add_parser(
         "fit",
         help="fit the per-sample models of a field store (bounded memory; --dask for a cluster)",
@@ -52,8 +51,8 @@ def add_fit(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
 def _run_fit(args: argparse.Namespace) -> int:
     from core.field_store import ReflectanceField
     from core.memory_budget import format_size
-    from processing.sample_model_store import default_models_path, write_sample_models
-    from processing.sample_models import budget_for, fit_sample_models, sample_block_size
+    from processing.sample_model_store import default_models_path, fit_to_file
+    from processing.sample_models import budget_for, sample_block_size
 
     field = ReflectanceField.open(args.field)
     target = args.output or default_models_path(field.path)
@@ -66,10 +65,12 @@ def _run_fit(args: argparse.Namespace) -> int:
             f"{sample_block_size(field, budget)} samples ({format_size(budget)} of radiance)",
             file=sys.stderr,
         )
-        fitted = fit_sample_models(
-            field, args.models, memory_bytes=budget, client=client, progress=not args.quiet
-        )
-    write_sample_models(target, fitted, field)
+        # Each block's fits go to the file as they come: a 24-megapixel capture's fits (13 GB
+        # for the five models) are never held whole.
+        fitted = fit_to_file(
+            field, target, args.models, memory_bytes=budget, client=client,
+            progress=not args.quiet,
+        )  # fmt: skip
     elapsed = time.perf_counter() - started
-    print(f"{', '.join(fitted.fits)} fitted to {p} samples in {elapsed:.1f} s -> {target}")
+    print(f"{', '.join(fitted.names)} fitted to {p} samples in {elapsed:.1f} s -> {target}")
     return 0

@@ -14,15 +14,31 @@ from pathlib import Path
 from typing import Any
 
 from app.cli_args import (
+    DEFAULT_VIEW_SIZE,
     add_camera_options,
     angles,
     count,
     finite,
     positive,
     require_output,
+    resampled_size,
     whole,
 )
-from app.cli_evaluate import add_below_horizon_option, add_transfer_option, relight_lights
+from app.cli_choices import (
+    INTERPOLATIONS,
+    MODEL_GRID_HEIGHT,
+    MODELS,
+    PREDICTORS,
+    SAMPLERS,
+    SCHEMES,
+)
+from app.cli_evaluate import (
+    add_below_horizon_option,
+    add_transfer_option,
+    relight_lights,
+    resample,
+    say_resampled,
+)
 from core.errors import InputError, RigError
 
 __all__ = ["add_relight"]
@@ -30,13 +46,6 @@ __all__ = ["add_relight"]
 
 def add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``rig relight`` on the ``rig`` sub-command parser."""
-    from processing.interpolation import METHODS
-    from processing.sample_models import MODELS
-    from processing.sampling import SAMPLERS
-    from render.light_prediction import PREDICTORS
-    from render.relight_mode import MOST_ACCURATE_MODELS
-    from render.relighter import SCHEMES
-
     p = commands.add_parser(
         "relight",
         help="relight a reflectance field under a panorama",
@@ -70,20 +79,24 @@ def add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
                    "lights instead of the panorama's grid)")  # fmt: skip
     p.add_argument("--model", choices=("auto", "auto-per-sample", *MODELS), default="auto",
                    help="scheme model: the model (default: by leave-one-light-out)")  # fmt: skip
-    p.add_argument("--grid", type=count, default=MOST_ACCURATE_MODELS.grid_height,
+    p.add_argument("--grid", type=count, default=MODEL_GRID_HEIGHT,
                    help="scheme model: the panorama summed into GRID x 2 GRID lights (default "
-                   f"{MOST_ACCURATE_MODELS.grid_height})")  # fmt: skip
+                   f"{MODEL_GRID_HEIGHT})")  # fmt: skip
     p.add_argument("--models", type=Path, help="saved fit of the field (default: FIELD.models.npz "
                    "beside the store; fitted and saved there when missing)")  # fmt: skip
     p.add_argument("--sampler", choices=SAMPLERS, default="tmed", help="sampler (default tmed)")
-    p.add_argument("--interp", choices=METHODS, help="interpolation over the measured lights")
-    p.add_argument("--view-interp", choices=METHODS, help="interpolation over the cameras")
+    p.add_argument(
+        "--interp", choices=INTERPOLATIONS, help="interpolation over the measured lights"
+    )
+    p.add_argument("--view-interp", choices=INTERPOLATIONS, help="interpolation over the cameras")
     p.add_argument("-m", type=count, help="nearest measured lights (paper, default 3)")
     p.add_argument("-n", type=count, help="nearest measured cameras (paper, default 3)")
     p.add_argument("--paper", action="store_true", help="the paper's configuration exactly")
     p.add_argument("--view", type=angles, help="camera AZ,INCL in degrees: required for a field of "
                    "points; a field of pixels (RTI) has its own view")  # fmt: skip
-    add_camera_options(p)
+    add_camera_options(p, size_help="image WIDTHxHEIGHT (default 512x512; a field of pixels, "
+                       "and --lights: the captured view's own size, resampled to this when "
+                       "given)")  # fmt: skip
     p.add_argument("--yaw", type=finite, default=0.0, help="rotate the environment, degrees CCW")
     p.add_argument("--exposure", type=positive, default=1.0, help="radiance scale (default 1)")
     p.add_argument("--modulation", type=Path, help="image multiplying the sampling density of "
@@ -144,16 +157,21 @@ def _relight_field(
     from render.relight_mode import open_relighter
     from render.sequence import relight_sequence
 
+    resample_to, native = None, (0, 0)
     if field.sample_kind == "pixels":
         camera = field.cameras[0]
         if args.view is not None:
             raise RigError(f"{args.field} holds one fixed view; drop --view")
+        # Relit at the capture's own pixels; a --size asked for is met by resampling the
+        # result (said below), a size of other proportions refused before any work.
+        height, width = field.image_shape
+        native = (width, height)
+        resample_to = resampled_size(args.size, native, f"the capture {args.field}")
     else:
         if args.view is None:
             raise RigError(f"--view AZ,INCL is needed to render the points of {args.field}")
-        camera = PinholeCamera(
-            args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
-        )
+        width, height = args.size or DEFAULT_VIEW_SIZE
+        camera = PinholeCamera(args.view[0], args.view[1], args.distance, args.fov, width, height)
         require_outside(field.points, camera)  # before the mode is chosen (a fit can be slow)
     s_count, t_count, _ = field.shape
     for flag, value, have, what in (("-m", args.m, t_count, "lights"),
@@ -179,6 +197,10 @@ def _relight_field(
         image = relighter.render()
         if args.renderer == "pyvista":
             _write_pyvista_picture(args, field, camera, image)
+        elif resample_to is not None:
+            say_resampled(native, resample_to)
+            write_image(args.output, resample(image.rgb, resample_to),
+                        resample(image.coverage, resample_to))  # fmt: skip
         else:
             write_image(args.output, image.rgb, image.coverage)
         _report_relit(args, image.holes, image.outside_fraction, mode.uses_models)
@@ -187,6 +209,9 @@ def _relight_field(
         relighter, panorama, camera, kind=args.sequence, frames=args.frames, progress=True,
         **lighting,
     )  # fmt: skip
+    if resample_to is not None:
+        say_resampled(native, resample_to)
+        frames = [resample(frame, resample_to) for frame in frames]
     write_sequence(args.output, frames, fps=args.fps)
     print(f"{args.frames} frames ({args.sequence}) -> {args.output}")
     return 0

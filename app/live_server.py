@@ -34,6 +34,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import sys
 import tempfile
 import threading
 import traceback
@@ -307,36 +308,82 @@ def build_app(session: LiveSession, uploads: Path) -> web.Application:
     return app
 
 
+#: Seconds a request under way (a frame being streamed, an upload) gets to finish once the
+#: viewer stops; then it is cancelled and its socket closed. An open page holds its WebSocket
+#: for as long as it is open: aiohttp's default (60 s) would keep Ctrl-C waiting that long.
+STOP_GRACE_S = 1.0
+#: Seconds :meth:`ViewerServer.stop` waits for the server's loop to shut down and stop.
+STOP_TIMEOUT_S = 10.0
+#: Seconds of waiting for the work under way when stopping before saying so.
+STOP_NOTICE_S = 1.0
+
+
 @dataclass
 class ViewerServer:
-    """A running viewer: its URL, and how to stop it."""
+    """A running viewer: its URL, and how to stop it.
+
+    ``_stopped`` is set by the loop's thread once its loop has stopped: the only sign of it
+    to trust after an interrupted :meth:`wait`. (On Python 3.11 a ``Thread.join`` that
+    Ctrl-C interrupts marks the thread finished while it runs on, so a later ``join`` returns
+    at once; closing the loop then failed with "Cannot close a running event loop".)
+    """
 
     url: str
     _loop: asyncio.AbstractEventLoop
     _runner: web.AppRunner
     _thread: threading.Thread
     _uploads: tempfile.TemporaryDirectory[str]
+    _stopped: threading.Event
 
     def stop(self) -> None:
-        """Stop serving and remove the uploads."""
-        future = asyncio.run_coroutine_threadsafe(self._runner.cleanup(), self._loop)
-        future.result(timeout=10.0)
-        self._loop.call_soon_threadsafe(self._loop.stop)
-        self._thread.join(timeout=10.0)
-        self._loop.close()
-        self._runner.app[VIEWER].worker.shutdown(wait=True)
+        """Stop serving, let the render under way finish, and remove the uploads.
+
+        Safe after an interrupted :meth:`wait` and when called twice. The runner is shut
+        down inside the loop (its sockets, the requests under way, the tasks left), then
+        the loop is stopped from this thread and closed once it no longer runs.
+        """
+        if not self._stopped.is_set():
+            shutdown = asyncio.run_coroutine_threadsafe(self._shutdown(), self._loop)
+            with contextlib.suppress(TimeoutError):  # the loop is stopped all the same
+                shutdown.result(timeout=STOP_TIMEOUT_S)
+            self._loop.call_soon_threadsafe(self._loop.stop)
+            self._stopped.wait(timeout=STOP_TIMEOUT_S)
+        if self._stopped.is_set() and not self._loop.is_closed():
+            self._loop.close()
+        # The work under way on the worker (a frame, the session's opening) cannot be stopped
+        # from here: it ends, and what is queued behind it is dropped. It may take a while,
+        # so the person who pressed Ctrl-C is told rather than left waiting in silence.
+        worker = self._runner.app[VIEWER].worker
+        worker.shutdown(wait=False, cancel_futures=True)
+        finishing = threading.Thread(target=worker.shutdown, name="rig-view-stop", daemon=True)
+        finishing.start()
+        finishing.join(timeout=STOP_NOTICE_S)
+        if finishing.is_alive():
+            print("rig view: waiting for the work under way to finish", file=sys.stderr,
+                  flush=True)  # fmt: skip
+            finishing.join()
         self._uploads.cleanup()
 
+    async def _shutdown(self) -> None:
+        await self._runner.cleanup()
+        current = asyncio.current_task()
+        left = [task for task in asyncio.all_tasks() if task is not current]
+        for task in left:
+            task.cancel()
+        await asyncio.gather(*left, return_exceptions=True)
+
     def wait(self) -> None:
-        """Serve until interrupted (Ctrl-C)."""
-        self._thread.join()
+        """Serve until interrupted (Ctrl-C, or SIGTERM under ``rig``)."""
+        self._stopped.wait()
 
 
 def start_viewer(session: LiveSession, *, host: str = "127.0.0.1", port: int = 0) -> ViewerServer:
     """Serve the viewer on ``host``:``port`` (0: a free port) from a background thread."""
     uploads = tempfile.TemporaryDirectory(prefix="rig-view-")
     loop = asyncio.new_event_loop()
-    runner = web.AppRunner(build_app(session, Path(uploads.name)), access_log=None)
+    runner = web.AppRunner(
+        build_app(session, Path(uploads.name)), access_log=None, shutdown_timeout=STOP_GRACE_S
+    )
     try:
         loop.run_until_complete(runner.setup())
         loop.run_until_complete(web.TCPSite(runner, host, port).start())
@@ -350,6 +397,14 @@ def start_viewer(session: LiveSession, *, host: str = "127.0.0.1", port: int = 0
         raise
     bound = runner.addresses[0]
     shown = f"[{bound[0]}]" if ":" in str(bound[0]) else bound[0]
-    thread = threading.Thread(target=loop.run_forever, name="rig-view", daemon=True)
+    stopped = threading.Event()
+
+    def serve() -> None:
+        try:
+            loop.run_forever()
+        finally:
+            stopped.set()
+
+    thread = threading.Thread(target=serve, name="rig-view", daemon=True)
     thread.start()
-    return ViewerServer(f"http://{shown}:{bound[1]}/", loop, runner, thread, uploads)
+    return ViewerServer(f"http://{shown}:{bound[1]}/", loop, runner, thread, uploads, stopped)

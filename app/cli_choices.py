@@ -1,0 +1,68 @@
+"""The names the ``rig`` parsers offer as choices and defaults, without importing the library.
+
+``rig --help`` and every sub-command's ``--help`` must answer at once, and the modules that own
+these names (:mod:`processing.sampling`, :mod:`render.light_prediction`, ...) import numpy,
+numba and zarr, seconds of start-up on a loaded machine. So the parsers take them from here,
+a module of literals, and ``tests/app/test_cli_startup.py`` checks each against its owner: a
+name added to the library and not here fails that test rather than going unoffered.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "CHOSEN",
+    "INTERPOLATIONS",
+    "MODELS",
+    "MODEL_GRID_HEIGHT",
+    "PREDICTORS",
+    "SAMPLERS",
+    "SCHEMES",
+    "SEQUENCES",
+    "SPLITS",
+]
+
+#: :data:`processing.sampling.SAMPLERS`: the panorama samplers.
+SAMPLERS = ("tmed", "ostromoukhov", "floyd-steinberg", "uniform", "cdf", "median-cut")
+
+#: :data:`processing.interpolation.METHODS`: interpolation over measured lights or cameras.
+INTERPOLATIONS = ("paper", "nearest", "barycentric", "rbf")
+
+#: :data:`processing.sample_models.MODELS`: the per-sample models.
+MODELS = ("lambert", "lambert+ggx", "ptm", "hsh2", "hsh3")
+
+#: :data:`render.light_prediction.PREDICTORS`: the methods that predict an unmeasured light.
+PREDICTORS = (
+    "nearest",
+    "barycentric",
+    "rbf",
+    "ptm",
+    "hsh2",
+    "hsh3",
+    "ptm-8bit",
+    "hsh2-8bit",
+    "hsh3-8bit",
+    "lambert",
+    "lambert+ggx",
+    "lambert+residual",
+    "lambert+ggx+residual",
+    "adaptive",
+    "learned",
+    "learned+residual",
+    "light-stage+lambert+ggx",
+)
+
+#: :data:`render.evaluation.CHOSEN`: the automatic choices ``rig evaluate`` also scores.
+CHOSEN = ("auto", "auto-fast")
+
+#: :data:`render.relighter.SCHEMES`: how a panorama lights a field (interpolation modes).
+SCHEMES = ("sampled", "pixels", "projection")
+
+#: :data:`render.light_splits.SPLITS`: the ways of holding out a field's own lights.
+SPLITS = ("every-other", "rings", "random")
+
+#: :data:`render.sequence.SEQUENCES`: what turns in a relit sequence.
+SEQUENCES = ("environment", "turntable")
+
+#: ``render.relight_mode.MOST_ACCURATE_MODELS.grid_height``: the grid the models sum a
+#: panorama into by default.
+MODEL_GRID_HEIGHT = 64
