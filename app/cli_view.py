@@ -114,8 +114,9 @@ def _run_view(args: argparse.Namespace) -> int:
         )
         pending = PendingSession(field, lambda report: opening(report=report), args.field)
         server = start_viewer(pending, host=args.host, port=args.port)
-        print(f"rig view: open {server.url} in a browser (Ctrl-C stops)", flush=True)
         try:
+            # Inside the try: a signal just after the URL still stops the server cleanly.
+            print(f"rig view: open {server.url} in a browser (Ctrl-C stops)", flush=True)
             server.wait()
         except KeyboardInterrupt:
             print("stopped", file=sys.stderr)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import time
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -156,10 +157,13 @@ class ChosenLight:
             )
         return None
 
-    def picture(self, light: tuple[float, float, float]) -> bytes:
+    def picture(
+        self, light: tuple[float, float, float], *, check: Callable[[], None] | None = None
+    ) -> bytes:
         """PNG of the field's view under ``light`` (camera frame: x right, y up, z to the camera).
 
-        The first call chooses the method (seconds to minutes; :attr:`status` says which).
+        The first call chooses the method (seconds to minutes; :attr:`status` says which);
+        ``check``, called at each step of the choice, may raise to abandon it.
         """
         import numpy as np
 
@@ -180,6 +184,8 @@ class ChosenLight:
             self.status = what
 
             def count(event: ProgressEvent) -> None:
+                if check is not None:
+                    check()
                 self.status = what if event.finished else f"{what}: {event}"
 
             with reporting_to(count):

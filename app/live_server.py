@@ -37,24 +37,30 @@ import json
 import sys
 import tempfile
 import threading
+import time
 import traceback
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from aiohttp import WSMsgType, web
 
+from app.light_view import ChosenLight, LightView
 from core.errors import InputError, RigError
+from core.field_store import ReflectanceField
 from core.image_io import encode_picture
+from core.progress import ProgressEvent, reporting_to
 from processing.environment import read_modulation_map
 from processing.panorama import read_panorama
 from processing.sampling import SAMPLERS
-from render.live_session import LIVE_MODES, ZOOM_RANGE, LiveFrame, LiveSession
+from render.live_session import LIVE_MODES, ZOOM_RANGE, LiveControls, LiveFrame, LiveSession
 from render.output import write_image
 
-__all__ = ["FRAME_JPEG_QUALITY", "ViewerServer", "start_viewer"]
+__all__ = ["FRAME_JPEG_QUALITY", "PendingSession", "ViewerServer", "start_viewer"]
 
 #: JPEG quality of streamed frames: a 512 x 512 frame is about 40 KB and encodes in ~3 ms.
 FRAME_JPEG_QUALITY = 90
@@ -72,26 +78,129 @@ def _page_file(name: str) -> bytes:
     return (resources.files("app") / _WEB / name).read_bytes()
 
 
+class ViewerStopped(Exception):
+    """The viewer stopped while long work ran for it: the work is abandoned."""
+
+
+@dataclass(frozen=True)
+class PendingSession:
+    """A session still to be opened: the field, and how to open the session over it.
+
+    The viewer serves its page at once and opens the session on a thread of its own (choosing
+    the best mode fits models: seconds to minutes), telling the page what it is doing; a field
+    of pixels gets its directional light first (:class:`app.light_view.LightView`).
+
+    Attributes
+    ----------
+    field : ReflectanceField
+    open : callable of a ``report(status: str)`` hook, returning the LiveSession
+    source : Path, what the person opened (the page's header)
+    """
+
+    field: ReflectanceField
+    open: Callable[[Callable[[str], None]], LiveSession]
+    source: Path
+
+
 class _Viewer:
     """The session behind the routes: one render at a time, on one worker thread."""
 
-    def __init__(self, session: LiveSession, uploads: Path) -> None:
-        self.session = session
+    def __init__(self, session: LiveSession | PendingSession, uploads: Path) -> None:
         self.uploads = uploads
-        self.controls = session.initial
         self.lock = asyncio.Lock()
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="relight")
+        self.light: LightView | None = None
+        self.chosen: ChosenLight | None = None
+        # The chosen method's frames run beside the session's (its choice takes a while).
+        self.light_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="light")
+        self.stopping = threading.Event()
+        if session.field.sample_kind == "pixels":
+            self.light = LightView(session.field, uploads / "rti")
+            self.chosen = ChosenLight(session.field)
+        self.status = "ready"
+        self.field = session.field
+        self.source = session.source
+        self.error: str | None = None
+        self.progress: ProgressEvent | None = None
+        self.started = time.monotonic()
+        self._session: LiveSession | None = None
+        self.controls = LiveControls()
+        if isinstance(session, LiveSession):
+            self._opened(session)
+            if self.light is not None:
+                self.worker.submit(self.light.prepare)
+        else:
+            self.status = "starting"
+            self.worker.submit(self._open, session)
+
+    def check_running(self) -> None:
+        """Raise :class:`ViewerStopped` once the viewer stops (long work's hooks call it)."""
+        if self.stopping.is_set():
+            raise ViewerStopped
+
+    def _opened(self, session: LiveSession) -> None:
+        self._session = session
+        self.controls = session.initial
+        self.status = "ready"
+
+    def _open(self, pending: PendingSession) -> None:
+        # The light first: on an RTI capture it is what the person came for, and it is quick.
+        if self.light is not None:
+            self.status = "preparing the directional light"
+            self.light.prepare()
+
+        def report(status: str) -> None:
+            self.check_running()
+            self.status = status
+            self.progress = None
+
+        def count(event: ProgressEvent) -> None:
+            self.check_running()
+            self.progress = None if event.finished else event
+
+        try:
+            with reporting_to(count):
+                self._opened(pending.open(report))
+        except ViewerStopped:
+            self.status = "stopped"
+        except RigError as error:
+            self.status, self.error = "failed", str(error)
+        except Exception as error:  # a fault of ours: the log gets the traceback, the page why
+            traceback.print_exc()
+            self.status, self.error = "failed", f"internal error: {error}"
+
+    def _field(self) -> dict[str, Any]:
+        return {
+            "field": str(self.source),
+            "kind": self.field.sample_kind,
+            "shape": list(self.field.shape),
+            "image_shape": list(self.field.image_shape or ()),
+        }
+
+    @property
+    def session(self) -> LiveSession:
+        """The open session (the routes that need it answer 503 until it is)."""
+        if self._session is None:
+            raise _error(web.HTTPServiceUnavailable, self.error or f"the viewer is {self.status}")
+        return self._session
 
     async def run(self, call: Any, *args: Any) -> Any:
         async with self.lock:
             return await asyncio.get_running_loop().run_in_executor(self.worker, call, *args)
 
     def state(self) -> dict[str, Any]:
-        s = self.session
+        if self._session is None:
+            progress = self.progress
+            return {
+                "status": self.status if progress is None else f"{self.status}: {progress}",
+                "error": self.error,
+                "elapsed_s": round(time.monotonic() - self.started, 1),
+                **self._field(),
+            }
+        s = self._session
         return {
-            "field": str(s.field.path),
-            "kind": s.field.sample_kind,
-            "shape": list(s.field.shape),
+            "status": "ready",
+            **self._field(),
             "can_orbit": s.can_orbit,
             "has_truth": s.truth is not None,
             "panoramas": list(s.panoramas),
@@ -120,8 +229,50 @@ async def _index(request: web.Request) -> web.Response:
 
 async def _static(request: web.Request) -> web.Response:
     name = request.match_info["name"]
-    kinds = {"viewer.js": "text/javascript", "viewer.css": "text/css"}
+    script, style = "text/javascript", "text/css"
+    kinds = {"viewer.js": script, "light.js": script, "viewer.css": style}
     return web.Response(body=_page_file(name), content_type=kinds[name])
+
+
+async def _light(request: web.Request) -> web.Response:
+    light = request.app[VIEWER].light
+    if light is None:
+        raise _error(web.HTTPNotFound, "a field of points has no directional light view")
+    chosen = request.app[VIEWER].chosen
+    assert chosen is not None  # made with the light view
+    return web.json_response({
+        **light.describe(),
+        "chosen": {
+            "status": chosen.status, "method": chosen.method, "unavailable": chosen.available(),
+        },
+    })  # fmt: skip
+
+
+async def _chosen_picture(request: web.Request) -> web.Response:
+    viewer = request.app[VIEWER]
+    if viewer.chosen is None:
+        raise _error(web.HTTPNotFound, "a field of points has no directional light view")
+    try:
+        x, y, z = (float(request.query[axis]) for axis in "xyz")
+    except (KeyError, ValueError):
+        raise _error(web.HTTPBadRequest, "send the light as ?x=X&y=Y&z=Z (numbers)") from None
+    loop = asyncio.get_running_loop()
+    try:
+        png = await loop.run_in_executor(
+            viewer.light_worker,
+            partial(viewer.chosen.picture, (x, y, z), check=viewer.check_running),
+        )
+    except RigError as error:
+        raise _error(web.HTTPBadRequest, str(error)) from None
+    return web.Response(body=png, content_type="image/png")
+
+
+async def _light_file(request: web.Request) -> web.FileResponse:
+    light = request.app[VIEWER].light
+    path = None if light is None else light.file(request.match_info["path"])
+    if path is None:
+        raise _error(web.HTTPNotFound, f"{request.match_info['path']}: no such file of the export")
+    return web.FileResponse(path)
 
 
 async def _state(request: web.Request) -> web.Response:
@@ -200,12 +351,15 @@ async def _send_picture(socket: web.WebSocketResponse, tag: str, picture: Any) -
     await socket.send_bytes(bytes([PICTURE_TAGS[tag]]) + jpeg)
 
 
-async def _send_frame(socket: web.WebSocketResponse, sequence: int, frame: LiveFrame) -> None:
+async def _send_frame(
+    socket: web.WebSocketResponse, sequence: int, frame: LiveFrame, idle: dict[str, str]
+) -> None:
     await socket.send_json({
         "type": "frame", "seq": sequence, "controls": frame.controls.to_json(),
         "mode": frame.mode, "notes": list(frame.notes),
         "ms": {k: round(v * 1000.0, 2) for k, v in frame.seconds.items()},
         "points": int(frame.image.needed.sum()),
+        "idle": idle,
     })  # fmt: skip
     await _send_picture(socket, "frame", frame.picture)
     await _send_picture(socket, "panorama", frame.panorama_picture)
@@ -234,7 +388,8 @@ async def _live(request: web.Request) -> web.WebSocketResponse:
                 await socket.send_json({"type": "error", "seq": sequence, "message": str(error)})
                 continue
             viewer.controls = controls
-            await _send_frame(socket, sequence, frame)
+            idle = viewer.session.idle_controls(controls)
+            await _send_frame(socket, sequence, frame, idle)
             if viewer.session.refinable(controls):
                 # Interactive frames are precomputed; once the person stops, the exact sum.
                 with contextlib.suppress(TimeoutError):
@@ -244,7 +399,7 @@ async def _live(request: web.Request) -> web.WebSocketResponse:
                 sequence += 1
                 exact = controls.updated({"exact": True})
                 frame = await viewer.run(viewer.session.render, exact)
-                await _send_frame(socket, sequence, frame)
+                await _send_frame(socket, sequence, frame, idle)
             if wanted.is_set():
                 continue  # the next frame is wanted: its warnings, not these
             warnings = await viewer.run(viewer.session.warnings)
@@ -293,12 +448,15 @@ async def _live(request: web.Request) -> web.WebSocketResponse:
     return socket
 
 
-def build_app(session: LiveSession, uploads: Path) -> web.Application:
+def build_app(session: LiveSession | PendingSession, uploads: Path) -> web.Application:
     """The aiohttp application of the viewer over ``session``."""
     app = web.Application(client_max_size=MAX_UPLOAD_BYTES)
     app[VIEWER] = _Viewer(session, uploads)
     app.router.add_get("/", _index)
-    app.router.add_get("/{name:viewer\\.(js|css)}", _static)
+    app.router.add_get("/{name:viewer\\.js|viewer\\.css|light\\.js}", _static)
+    app.router.add_get("/api/light", _light)
+    app.router.add_get("/api/light/chosen.png", _chosen_picture)
+    app.router.add_get("/rti/{path:.+}", _light_file)
     app.router.add_get("/api/state", _state)
     app.router.add_get("/api/live", _live)
     app.router.add_post("/api/panorama", _panorama)
@@ -350,12 +508,21 @@ class ViewerServer:
             self._stopped.wait(timeout=STOP_TIMEOUT_S)
         if self._stopped.is_set() and not self._loop.is_closed():
             self._loop.close()
-        # The work under way on the worker (a frame, the session's opening) cannot be stopped
-        # from here: it ends, and what is queued behind it is dropped. It may take a while,
-        # so the person who pressed Ctrl-C is told rather than left waiting in silence.
-        worker = self._runner.app[VIEWER].worker
-        worker.shutdown(wait=False, cancel_futures=True)
-        finishing = threading.Thread(target=worker.shutdown, name="rig-view-stop", daemon=True)
+        # A frame under way on a worker ends, and what is queued behind it is dropped; the
+        # session's opening and the chosen method's choice stop at their next stage or step
+        # (their hooks raise once the viewer stops). What remains may take a while, so the
+        # person who pressed Ctrl-C is told rather than left waiting in silence.
+        viewer = self._runner.app[VIEWER]
+        viewer.stopping.set()
+        workers = (viewer.worker, viewer.light_worker)
+        for worker in workers:
+            worker.shutdown(wait=False, cancel_futures=True)
+
+        def finish() -> None:
+            for worker in workers:
+                worker.shutdown()
+
+        finishing = threading.Thread(target=finish, name="rig-view-stop", daemon=True)
         finishing.start()
         finishing.join(timeout=STOP_NOTICE_S)
         if finishing.is_alive():
@@ -377,7 +544,9 @@ class ViewerServer:
         self._stopped.wait()
 
 
-def start_viewer(session: LiveSession, *, host: str = "127.0.0.1", port: int = 0) -> ViewerServer:
+def start_viewer(
+    session: LiveSession | PendingSession, *, host: str = "127.0.0.1", port: int = 0
+) -> ViewerServer:
     """Serve the viewer on ``host``:``port`` (0: a free port) from a background thread."""
     uploads = tempfile.TemporaryDirectory(prefix="rig-view-")
     loop = asyncio.new_event_loop()

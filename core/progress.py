@@ -9,7 +9,8 @@ bar whether it is drawn or not.
 
 A hook is a callable of one :class:`ProgressEvent`; it is installed for the current context
 (a thread, or an asyncio task), so two viewers' sessions or two Dask tasks do not see each
-other's work. A hook must be quick and must not raise: it runs inside the library's loop.
+other's work. A hook must be quick: it runs inside the library's loop. It may raise to abandon
+the work (a viewer that stops, say): the exception leaves the library's call as any other.
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ class ProgressHook(Protocol):
     """What receives the events of the bars in its context."""
 
     def __call__(self, event: ProgressEvent, /) -> None:
-        """Take one event (quickly; never raise)."""
+        """Take one event (quickly; raising abandons the work)."""
 
 
 _HOOKS: ContextVar[tuple[ProgressHook, ...]] = ContextVar("progress_hooks", default=())
