@@ -62,6 +62,9 @@ from render.output import write_image
 
 __all__ = ["FRAME_JPEG_QUALITY", "PendingSession", "ViewerServer", "start_viewer"]
 
+#: A pending session over a field of pixels larger than this (pixels) opens on the page's
+#: request: the directional light needs no fit, relighting under a panorama does.
+OPEN_ON_REQUEST_PIXELS = 8_000_000
 #: JPEG quality of streamed frames: a 512 x 512 frame is about 40 KB and encodes in ~3 ms.
 FRAME_JPEG_QUALITY = 90
 #: Seconds without a new control before an interactive frame is refined to the exact sum.
@@ -114,6 +117,8 @@ class _Viewer:
         # The chosen method's frames run beside the session's (its choice takes a while).
         self.light_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="light")
         self.stopping = threading.Event()
+        self.on_request = False
+        self._pending: PendingSession | None = None
         if session.field.sample_kind == "pixels":
             self.light = LightView(session.field, uploads / "rti")
             self.chosen = ChosenLight(session.field)
@@ -131,7 +136,28 @@ class _Viewer:
                 self.worker.submit(self.light.prepare)
         else:
             self.status = "starting"
-            self.worker.submit(self._open, session)
+            self._pending = session
+            height, width = session.field.image_shape or (0, 0)
+            if width * height > OPEN_ON_REQUEST_PIXELS:
+                # A large capture: its light first, the panorama session (a fit over every
+                # pixel: minutes, and memory) only when the person asks for it.
+                if self.light is not None:
+                    self.worker.submit(self.light.prepare)
+                self.status = (
+                    f"waiting: relighting this {width * height / 1e6:.0f}-megapixel capture "
+                    "under a panorama fits models over every pixel (minutes); open it on request"
+                )
+                self.on_request = True
+            else:
+                self.open_session()
+
+    def open_session(self) -> None:
+        """Start opening the pending session (once; the page polls the state)."""
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            self.on_request = False
+            self.status = "starting"
+            self.worker.submit(self._open, pending)
 
     def check_running(self) -> None:
         """Raise :class:`ViewerStopped` once the viewer stops (long work's hooks call it)."""
@@ -145,7 +171,7 @@ class _Viewer:
 
     def _open(self, pending: PendingSession) -> None:
         # The light first: on an RTI capture it is what the person came for, and it is quick.
-        if self.light is not None:
+        if self.light is not None and self.light.status == "waiting":
             self.status = "preparing the directional light"
             self.light.prepare()
 
@@ -193,6 +219,7 @@ class _Viewer:
             progress = self.progress
             return {
                 "status": self.status if progress is None else f"{self.status}: {progress}",
+                "on_request": self.on_request,
                 "error": self.error,
                 "elapsed_s": round(time.monotonic() - self.started, 1),
                 **self._field(),
@@ -273,6 +300,12 @@ async def _light_file(request: web.Request) -> web.FileResponse:
     if path is None:
         raise _error(web.HTTPNotFound, f"{request.match_info['path']}: no such file of the export")
     return web.FileResponse(path)
+
+
+async def _open_session(request: web.Request) -> web.Response:
+    viewer = request.app[VIEWER]
+    viewer.open_session()
+    return web.json_response(viewer.state())
 
 
 async def _state(request: web.Request) -> web.Response:
@@ -458,6 +491,7 @@ def build_app(session: LiveSession | PendingSession, uploads: Path) -> web.Appli
     app.router.add_get("/api/light/chosen.png", _chosen_picture)
     app.router.add_get("/rti/{path:.+}", _light_file)
     app.router.add_get("/api/state", _state)
+    app.router.add_post("/api/open", _open_session)
     app.router.add_get("/api/live", _live)
     app.router.add_post("/api/panorama", _panorama)
     app.router.add_post("/api/modulation", _modulation)

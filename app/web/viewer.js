@@ -301,6 +301,10 @@ function wire() {
     const blob = await paintedMap();
     upload("modulation", new File([blob], `painted-${painted}.png`));
   });
+  $("open-session").addEventListener("click", async () => {
+    $("open-session").hidden = true;
+    await fetch("api/open", { method: "POST" });
+  });
   document.addEventListener("dragover", (e) => e.preventDefault());
   document.addEventListener("drop", (e) => {
     e.preventDefault();
@@ -329,6 +333,7 @@ async function start() {
       return;
     }
     $("status").textContent = `server: ${info.status}… (${info.elapsed_s} s)`;
+    $("open-session").hidden = !info.on_request;
     await new Promise((r) => setTimeout(r, 400));
   }
   $("status").textContent = "connecting…";

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 import pytest
 
-from app import light_view
+from app import light_view, live_server
 from app.cli import main
 from app.cli_view import open_session
 from app.live_server import PendingSession, ViewerServer, start_viewer
@@ -251,6 +251,30 @@ def test_the_chosen_method_is_relit_by_the_server(browser: Any, tmp_path: Path) 
         with pytest.raises(urllib.error.HTTPError) as refused:
             urllib.request.urlopen(bad)
         assert refused.value.code == 400 and "unit direction" in refused.value.read().decode()
+        assert errors == []
+        page.close()
+    finally:
+        _off_the_loop(server.stop)
+
+
+def test_a_large_capture_opens_its_panorama_session_on_request(
+    browser: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # As a 24-megapixel capture: the light at once, the panorama session's fit when asked.
+    monkeypatch.setattr(live_server, "OPEN_ON_REQUEST_PIXELS", 1000)
+    field = _sphere_field(tmp_path / "sphere.zarr", size=32)
+    server = _serve(field, tmp_path / "sphere.zarr")
+    try:
+        page, errors = _open_page(browser, server.url)
+        page.wait_for_selector("#open-session", state="visible")
+        assert "on request" in page.inner_text("#status")
+        assert page.evaluate("() => document.body.classList.contains('preparing')")
+        page.click("#open-session")
+        page.wait_for_function("() => !document.body.classList.contains('preparing')",
+                               timeout=600_000)  # fmt: skip
+        page.wait_for_function("() => document.getElementById('status').textContent === 'live'",
+                               timeout=600_000)  # fmt: skip
+        assert page.is_hidden("#open-session")
         assert errors == []
         page.close()
     finally:
