@@ -33,6 +33,7 @@ from __future__ import annotations
 import os
 import shutil
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal, get_args
@@ -364,6 +365,8 @@ CACHED_SLABS = 8
 #: ...and at most this many bytes of them, whatever the field's size (a 2M-point slab is
 #: 720 MB: two stay, not eight).
 CACHED_SLAB_BYTES = 2 << 30
+#: Stored radiance :meth:`ReflectanceField.tiles` reads at once (a band of image rows).
+TILE_READ_BYTES = 64 << 20
 
 
 @dataclass(eq=False)
@@ -588,6 +591,107 @@ class ReflectanceField:
     def load(self) -> NDArray[np.floating]:
         """The whole radiance array (S, T, P, 3) in memory, in its storage dtype."""
         return np.stack([self.camera_radiance(s) for s in range(self.shape[0])])
+
+    def tiles(
+        self, origins: Sequence[tuple[int, int]], side: int, columns: int
+    ) -> ReflectanceField:
+        """Square windows of a pixel field's view side by side in one image, held in memory.
+
+        What a view too large to score whole is scored on (:mod:`render.evaluation`): each
+        window's pixels keep their neighbours, so image metrics (SSIM) see the same
+        neighbourhoods as in the whole view. Read band by band of image rows (at most
+        :data:`TILE_READ_BYTES` of stored radiance at once), so a 24-megapixel view is never
+        read whole.
+
+        Parameters
+        ----------
+        origins : sequence of (row, column), the top-left pixel of each window in the view;
+            every window lies inside the view
+        side : int, the windows' side in pixels
+        columns : int, windows per row of the mosaic; window i is at mosaic row i // columns,
+            column i % columns (cells left over at the end are black and not visible)
+
+        Returns
+        -------
+        ReflectanceField
+            Every light, radiance (1, T, P', 3) float32 of the mosaic (``rows side`` x
+            ``columns side`` pixels, row-major), its visibility, the camera with the mosaic's
+            size; ``provenance["tiles_of"]`` names the store and the windows.
+
+        Raises
+        ------
+        InputError
+            A field of points, no windows, a window outside the view, a side or column count
+            below 1.
+        """
+        if self.image_shape is None:
+            raise InputError(f"{self.path}: windows of a view need a field of pixels")
+        height, width = self.image_shape
+        if not origins or side < 1 or columns < 1:
+            raise InputError(f"{self.path}: windows need origins, a side and columns >= 1")
+        for row, column in origins:
+            if not (0 <= row <= height - side and 0 <= column <= width - side):
+                raise InputError(
+                    f"{self.path}: a {side} x {side} window at row {row}, column {column} is "
+                    f"not inside the {width} x {height} view"
+                )
+        _, t_count, _ = self.shape
+        rows = -(-len(origins) // columns)
+        mosaic = np.zeros((t_count, rows * side, columns * side, 3), dtype=np.float32)
+        seen = np.zeros((rows * side, columns * side), dtype=bool)
+        visible = self.visibility[0].reshape(height, width)
+        step = max(1, TILE_READ_BYTES // (t_count * width * 3 * self.dtype.itemsize))
+        for top in range(0, height, step):
+            bottom = min(top + step, height)
+            covering = [(i, r, c) for i, (r, c) in enumerate(origins)
+                        if r < bottom and r + side > top]  # fmt: skip
+            if not covering:
+                continue
+            band = self.camera_radiance(0, slice(top * width, bottom * width))
+            band = band.reshape(t_count, bottom - top, width, 3)
+            for index, row, column in covering:
+                first, last = max(row, top), min(row + side, bottom)
+                y = index // columns * side + first - row
+                x = index % columns * side
+                mosaic[:, y : y + last - first, x : x + side] = band[
+                    :, first - top : last - top, column : column + side
+                ]
+                seen[y : y + last - first, x : x + side] = visible[
+                    first:last, column : column + side
+                ]
+        camera = replace(self.cameras[0], width=columns * side, height=rows * side)
+        return ReflectanceField(
+            # A path of its own: nothing beside the store (a saved model fit) belongs to it.
+            path=self.path.with_name(self.path.name + "[tiles]"),
+            light_directions=self.light_directions,
+            camera_directions=self.camera_directions,
+            cameras=[camera],
+            visibility=seen.reshape(1, -1),
+            points=None,
+            normals=None if self.normals is None else self._tiled_normals(origins, side, columns),
+            image_shape=(rows * side, columns * side),
+            light_model=self.light_model,
+            provenance=self.provenance | {"tiles_of": {
+                "store": str(self.path), "side": side, "columns": columns,
+                "origins": [[int(r), int(c)] for r, c in origins],
+            }},
+            radiance=mosaic.reshape(1, t_count, -1, 3),
+            cached_slabs=1,
+        )  # fmt: skip
+
+    def _tiled_normals(
+        self, origins: Sequence[tuple[int, int]], side: int, columns: int
+    ) -> NDArray[np.float32]:
+        """The stored normals (P, 3) of :meth:`tiles`'s windows, laid out as its mosaic."""
+        assert self.normals is not None and self.image_shape is not None
+        height, width = self.image_shape
+        rows = -(-len(origins) // columns)
+        out = np.zeros((rows * side, columns * side, 3), dtype=np.float32)
+        grid = self.normals.reshape(height, width, 3)
+        for index, (row, column) in enumerate(origins):
+            y, x = index // columns * side, index % columns * side
+            out[y : y + side, x : x + side] = grid[row : row + side, column : column + side]
+        return out.reshape(-1, 3)
 
     def subset(
         self,

@@ -25,7 +25,9 @@ import hashlib
 import os
 import sys
 import tempfile
+from collections import deque
 from collections.abc import Iterator, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Literal
@@ -76,6 +78,8 @@ NOMINAL_FOV_DEG = 10.0
 
 #: Mask sidecars beside an ``.lp`` file, in the order looked for (``{stem}``: the file's stem).
 MASK_SIDECARS = ("{stem}.mask.png", "mask.png")
+#: Images decoded ahead of the one being written (each an 8-bit 24-megapixel image is 72 MB).
+DECODE_AHEAD = 2
 #: What ``transfer="auto"`` assumes, as the import reports it.
 _AUTO_RULE = "auto: 8-bit is sRGB, 16-bit and float are linear"
 
@@ -210,7 +214,7 @@ def import_rti(
     lp_path: str | os.PathLike[str],
     output_store: str | os.PathLike[str],
     *,
-    dtype: str = "float32",
+    dtype: str = "auto",
     progress: bool = True,
     overwrite: bool = True,
     transfer: TransferChoice = "auto",
@@ -224,7 +228,12 @@ def import_rti(
     lp_path : path to the ``.lp`` file; image names are relative to its folder
     output_store : path of the field store to create
     overwrite : bool, replace an existing field store there (and the fit saved beside it)
-    dtype : {"float32", "float16"}, storage dtype of the radiance
+    dtype : {"auto", "float32", "float16"}
+        Storage dtype of the radiance. ``"auto"``: float16 for 8-bit images (each of the 256
+        levels keeps a distinct float16, within 0.05 % of its linear value, and reads back to
+        the same level: nothing is lost, and the store and every read of it are half the
+        float32 size), float32 for 16-bit and float images and for images divided by light
+        intensities.
     progress : bool
         Show a progress bar (one step per image) and print what the import assumed (the
         ``assumed`` line below) to stderr first.
@@ -271,11 +280,16 @@ def import_rti(
     -----
     The store is written beside ``output_store`` under a temporary name and renamed into place
     once complete: a failed or interrupted import leaves no half-filled store behind.
+
+    The images stream: each is decoded once (the next ones on a thread meanwhile, at most
+    :data:`DECODE_AHEAD` ahead), converted through a table of its levels and written as its
+    slab, so the import holds a few images whatever the capture's length (measured at 24
+    megapixels x 60 lights: ``docs/scale.md``).
     """
     lp_file = Path(lp_path)
     target = Path(output_store)
-    if dtype not in ("float16", "float32"):
-        raise InputError(f"field dtype must be float16 or float32, got {dtype!r}")
+    if dtype not in ("auto", "float16", "float32"):
+        raise InputError(f"field dtype must be auto, float16 or float32, got {dtype!r}")
     if transfer not in ("auto", "srgb", "linear"):
         raise InputError(f"transfer must be 'auto', 'srgb' or 'linear', got {transfer!r}")
     if below_horizon not in BELOW_HORIZON:
@@ -300,6 +314,8 @@ def import_rti(
     )
     height, width = first.shape[:2]
     visible, mask_record = _mask(lp_file, mask, height, width)
+    stored = _store_dtype(dtype, depth, intensities)
+    table = _level_table(applied, depth, np.float32 if intensities is not None else stored)
     assumed = "; ".join(
         [
             f"rti {lp_file.name}: {len(lights)} {depth} images {transfer_said}",
@@ -315,6 +331,12 @@ def import_rti(
             "below the horizon: blocked by the base (environment light from below is dropped)"
             if below_horizon == "blocked"
             else "below the horizon: open (the object is lit from below too)",
+            f"stored as {stored}"
+            + (
+                " (8-bit levels: float16 keeps each one distinct, nothing is lost)"
+                if dtype == "auto" and stored == "float16"
+                else ""
+            ),
         ]
     )
     if progress:
@@ -328,7 +350,7 @@ def import_rti(
         light_directions=camera_to_rig(lights.directions, camera),
         cameras=[camera],
         image_shape=(height, width),
-        dtype=dtype,
+        dtype=stored,
         light_model={
             "type": "directional",
             "irradiance": 1.0,
@@ -361,11 +383,11 @@ def import_rti(
         },
     )
     try:
-        steps = tqdm(paths, desc="rti", unit="image", disable=not progress)
-        for index, path in enumerate(steps):
+        steps = tqdm(total=len(paths), desc="rti", unit="image", disable=not progress)
+        buffer: NDArray[np.floating] | None = None
+        for index, pixels in enumerate(_decoded(paths, first, lp_file, lights)):
             where = f"{lp_file}, line {lights.line(index)}"
-            pixels = first if index == 0 else _read_rti_pixels(path, where)
-            name = lights.files[index]
+            path, name = paths[index], lights.files[index]
             if pixels.shape[:2] != (height, width):
                 raise DatasetError(
                     f"{where}: image {name!r} is {pixels.shape[1]}x{pixels.shape[0]} pixels, "
@@ -378,11 +400,21 @@ def import_rti(
                     f"{depth}; a capture's images share one bit depth (one transfer curve "
                     "decodes them all): convert them alike"
                 )
-            image = _linear_rti_image(pixels, applied, path, where)
+            if table is not None:
+                # One look-up a value: the curve's powers cost seconds a 24-megapixel image;
+                # into one buffer, as fresh pages for every image cost the kernel's time too.
+                if buffer is None or buffer.shape != pixels.shape:
+                    buffer = np.empty(pixels.shape, dtype=table.dtype)
+                image = _look_up(table, pixels, buffer)
+            else:
+                image = _linear_rti_image(pixels, applied, path, where)
+            del pixels
             if intensities is not None:
                 # Radiance per unit irradiance: the lights' differences leave the data.
                 image = image / np.float32(intensities[index])
             writer.write_slab(0, index, image.reshape(-1, 3))
+            del image
+            steps.update()
         steps.close()
         writer.write_visibility(0, visible)
     except BaseException:
@@ -390,6 +422,77 @@ def import_rti(
         raise
     writer.finish()
     return ReflectanceField.open(target)
+
+
+def _store_dtype(
+    dtype: str, depth: PixelDepth, intensities: NDArray[np.float64] | None
+) -> Literal["float16", "float32"]:
+    """The radiance dtype of the store: as asked, or ``"auto"``'s choice (see import_rti)."""
+    if dtype == "float16":
+        return "float16"
+    if dtype == "float32":
+        return "float32"
+    # Every 8-bit level's linear value keeps a float16 of its own (within 0.05 % of it) and
+    # reads back to the same level: half the store and its reading, nothing of the data lost.
+    # Divided by intensities, the values are no longer the 256 levels: they stay float32.
+    return "float16" if depth == "8-bit" and intensities is None else "float32"
+
+
+def _level_table(
+    transfer: Transfer, depth: PixelDepth, dtype: type[np.floating] | str
+) -> NDArray[np.floating] | None:
+    """The linear value (in ``dtype``) of every stored level of 8- or 16-bit images; None for float.
+
+    ``table[pixels]`` is :func:`core.image_io.linear_from_pixels` of ``pixels`` bit for bit
+    (the same function of the same levels), then cast to ``dtype`` as the store would.
+    """
+    if depth == "float":
+        return None
+    levels = np.arange(256 if depth == "8-bit" else 65536).astype(
+        np.uint8 if depth == "8-bit" else np.uint16
+    )
+    return linear_from_pixels(levels, transfer=transfer).astype(dtype)
+
+
+def _look_up(
+    table: NDArray[np.floating], pixels: NDArray[Any], out: NDArray[np.floating]
+) -> NDArray[np.floating]:
+    """``table[pixels]`` into ``out`` (same shape as ``pixels``, the table's dtype)."""
+    if pixels.dtype == np.uint8:
+        import cv2
+
+        # OpenCV's table look-up is 3x numpy's (which widens every index to 64 bits first);
+        # it knows no float16, whose values it moves as their 16-bit patterns.
+        carried = table.view(np.uint16) if table.dtype == np.float16 else table
+        cv2.LUT(pixels, carried, dst=out.view(carried.dtype))
+        return out
+    return np.take(table, pixels, out=out)
+
+
+def _decoded(
+    paths: Sequence[Path], first: NDArray[Any], lp_file: Path, lights: LightPositions
+) -> Iterator[NDArray[Any]]:
+    """The stored values of each image in order, the next ones decoded on a thread meanwhile.
+
+    Decoding (OpenCV releases the GIL) overlaps converting and writing the image before: at
+    most :data:`DECODE_AHEAD` images wait decoded, so the import holds a few images whatever
+    the capture's length.
+    """
+    yield first
+    with ThreadPoolExecutor(1, thread_name_prefix="rti-decode") as pool:
+        waiting: deque[Future[NDArray[Any]]] = deque()
+        following = iter(range(1, len(paths)))
+        try:
+            for index in following:
+                where = f"{lp_file}, line {lights.line(index)}"
+                waiting.append(pool.submit(_read_rti_pixels, paths[index], where))
+                if len(waiting) > DECODE_AHEAD:
+                    yield waiting.popleft().result()
+            while waiting:
+                yield waiting.popleft().result()
+        finally:
+            for future in waiting:
+                future.cancel()
 
 
 def _depth(pixels: NDArray[Any], path: Path, where: str) -> PixelDepth:

@@ -16,7 +16,7 @@ from core.errors import InputError
 from processing.sample_models.fits import BASIS_MODELS, BasisFit, BasisModelName
 from processing.sample_models.loo import LooError
 
-__all__ = ["evaluate_basis", "fit_basis"]
+__all__ = ["BASIS_CHUNK", "evaluate_basis", "fit_basis"]
 
 
 def evaluate_basis(name: str, directions: NDArray[np.floating]) -> NDArray[np.float64]:
@@ -64,18 +64,37 @@ def evaluate_basis(name: str, directions: NDArray[np.floating]) -> NDArray[np.fl
     return np.stack(columns, axis=1)
 
 
+def _per_pixel_sum(values: NDArray[np.float64], t_count: int, count: int) -> NDArray[np.float64]:
+    """Sum over lights and channels of ``values`` (T, n 3) squared: (n,), float64.
+
+    Channels first, then lights one after the other: the same additions for a pixel whatever
+    the number of pixels summed with it (a reduction over both axes at once groups its terms
+    by the array's length, and a pixel's error would change in its last digit with its block).
+    """
+    squared = (values**2).reshape(t_count, count, 3)
+    return np.add.reduce(squared[:, :, 0] + squared[:, :, 1] + squared[:, :, 2], axis=0)
+
+
+#: Pixels fitted at once: the float64 temporaries (the values, residuals, held-out errors)
+#: are a few times T x this x 3 x 8 bytes (47 MB each at 60 lights), whatever the pixels.
+BASIS_CHUNK = 32768
+
+
 def fit_basis(
-    name: BasisModelName, values: NDArray[np.float32], camera_lights: NDArray[np.float64]
+    name: BasisModelName, values: NDArray[np.floating], camera_lights: NDArray[np.float64]
 ) -> BasisFit:
     """Least-squares basis coefficients of every pixel and their closed-form LOO error.
 
     The design (T, B) is shared by all pixels, so one pseudo-inverse fits them all and the hat
-    matrix gives every LOO residual at once: e_i / (1 - h_ii).
+    matrix gives every LOO residual at once: e_i / (1 - h_ii). Pixels are fitted
+    :data:`BASIS_CHUNK` at a time, so the memory is that of ``values`` and the coefficients
+    whatever their number.
 
     Parameters
     ----------
     name : {"ptm", "hsh2", "hsh3"}
-    values : ndarray, shape (T, P, 3), float32, one camera's slab (linear radiance)
+    values : ndarray, shape (T, P, 3), float32, one camera's slab (linear radiance; any
+        strides: a block of samples transposed to light-major will do)
     camera_lights : ndarray, shape (T, 3), float64, the measured lights in the camera frame
 
     Returns
@@ -95,15 +114,21 @@ def fit_basis(
             f"the field has {t_count}"
         )
     pinv = np.linalg.pinv(design)  # (B, T)
-    flat = values.reshape(t_count, -1).astype(np.float64)
-    coefficients = pinv @ flat  # (B, P 3)
     leverage = np.einsum("tb,bt->t", design, pinv)
-    residual = flat - design @ coefficients
-    held_out = residual / np.maximum(1.0 - leverage, 1e-9)[:, None]
-    squared = (held_out**2).reshape(t_count, p_count, 3).sum(axis=(0, 2))
-    energy = (flat**2).reshape(t_count, p_count, 3).sum(axis=(0, 2))
-    return BasisFit(
-        name=name,
-        coefficients=coefficients.reshape(-1, p_count, 3).transpose(1, 0, 2).astype(np.float32),
-        loo=LooError(squared, energy),
-    )
+    coefficients = np.empty((p_count, design.shape[1], 3), dtype=np.float32)
+    squared = np.empty(p_count)
+    energy = np.empty(p_count)
+    for start in range(0, p_count, BASIS_CHUNK):
+        part = slice(start, min(start + BASIS_CHUNK, p_count))
+        count = part.stop - part.start
+        flat = values[:, part].reshape(t_count, -1).astype(np.float64)
+        # Every coefficient and residual a dot product of its own, in one order whatever the
+        # chunk: BLAS's matrix product sums a column at a chunk's edge in another order than
+        # one inside, so a pixel's fit would change in its last digit with its block.
+        fitted = np.einsum("bt,tn->bn", pinv, flat, optimize=False)  # (B, n 3)
+        residual = flat - np.einsum("tb,bn->tn", design, fitted, optimize=False)
+        held_out = residual / np.maximum(1.0 - leverage, 1e-9)[:, None]
+        squared[part] = _per_pixel_sum(held_out, t_count, count)
+        energy[part] = _per_pixel_sum(flat, t_count, count)
+        coefficients[part] = fitted.reshape(-1, count, 3).transpose(1, 0, 2)
+    return BasisFit(name=name, coefficients=coefficients, loo=LooError(squared, energy))

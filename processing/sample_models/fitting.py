@@ -1,13 +1,16 @@
-"""Fitting a field's per-sample models: :func:`fit_sample_models`.
+"""Fitting a field's per-sample models: :func:`fit_sample_models` and :func:`fit_blocks`.
 
-:func:`fit_sample_models` checks the request, fits the linear bases, finds the starting normals
-and runs the parametric kernel over memory-bounded blocks of samples, in-process or as Dask
-tasks (one per block).
+:func:`fit_blocks` checks the request and, over memory-bounded blocks of samples, in-process or
+as Dask tasks (one per block), fits the linear bases, finds the starting normals and runs the
+parametric kernel: each block is read from the store once and fitted whole, by every model.
+:func:`fit_sample_models` gathers the blocks into a :class:`SampleModels` held in memory;
+:func:`processing.sample_model_store.fit_to_file` writes them to the fit file as they come, for
+fields whose fits do not fit in memory (a 24-megapixel capture's five models are 13 GB).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,12 +22,13 @@ from core.camera_model import rig_to_camera
 from core.errors import DatasetError, InputError
 from core.field_store import ReflectanceField, is_field_store
 from core.memory_budget import default_memory_budget, format_size
-from processing.sample_models.bases import fit_basis
+from processing.sample_models.bases import evaluate_basis, fit_basis
 from processing.sample_models.fit_kernel import fit_samples
 from processing.sample_models.fits import (
     BASIS_MODELS,
     MODELS,
     PARAMETRIC_MODELS,
+    BasisFit,
     Fit,
     ModelName,
     ParametricFit,
@@ -32,9 +36,18 @@ from processing.sample_models.fits import (
     SampleModels,
 )
 from processing.sample_models.loo import LooError, leave_one_out_weights
-from processing.sample_models.stereo import photometric_stereo
+from processing.sample_models.stereo import check_stereo_lights, photometric_stereo
 
-__all__ = ["ALPHA_RANGE", "budget_for", "fit_sample_models", "sample_block_size"]
+__all__ = [
+    "ALPHA_RANGE",
+    "FIT_BLOCK_BYTES",
+    "BlockFits",
+    "FitLayout",
+    "budget_for",
+    "fit_blocks",
+    "fit_sample_models",
+    "sample_block_size",
+]
 
 #: GGX roughness searched (a lobe narrower than 0.02 is a mirror no rig samples).
 ALPHA_RANGE = (0.02, 1.0)
@@ -47,6 +60,12 @@ SHADOW_RATIO = 0.5
 SHADOW_ITERATIONS = 4
 #: Normal refinement: first step and smallest step (radians) of the pattern search.
 REFINE_STEP, REFINE_MIN_STEP = 0.08, 0.002
+#: Largest block (bytes of float32 radiance) the default budget gives. The kernel keeps both
+#: cores busy with blocks of a few thousand samples, so a larger block buys no speed, only
+#: memory: the block as stored and widened, and its fits (up to 530 bytes a sample for a pixel
+#: field's five models at 60 lights), are most of a fit's peak. At 60 lights 512 MiB is 745,000
+#: pixels; a 24-megapixel capture fits in 33 blocks at a peak under 2 GiB (docs/scale.md).
+FIT_BLOCK_BYTES = 512 << 20
 
 
 def fit_sample_models(
@@ -77,12 +96,14 @@ def fit_sample_models(
         Move each normal to the parametric model's optimum (pattern search). Default: on for
         pixel fields (their normals come from photometric stereo), off for point fields.
     memory_bytes : int, optional
-        Bytes of radiance held in memory at once (default
-        :func:`core.memory_budget.default_memory_budget`): the field is read and fitted in
-        blocks of samples (float32, every camera and light of each sample) of at most this
-        size, aligned to the store's chunks. The peak is up to twice this (a block as stored
-        while it is widened and reordered) plus the outputs (the fits: about 100 + T bytes
-        a sample per model), whatever the field's size.
+        Bytes of radiance held in memory at once (default :func:`budget_for`): the field is
+        read and fitted in blocks of samples (float32, every camera and light of each sample)
+        of at most this size, aligned to the store's chunks; every model, the basis models and
+        the photometric-stereo normals of a pixel field included, is fitted block by block.
+        The peak is up to twice this (a block as stored while it is widened and reordered)
+        plus the outputs (the fits: about 100 + T bytes a sample per parametric model, 12 B +
+        16 bytes per basis model), whatever the field's size; :func:`fit_blocks` streams the
+        outputs instead of holding them.
     client : distributed.Client, optional
         Fit the blocks as Dask tasks on this client's cluster (:func:`core.cluster.dask_client`;
         each worker reads its block from the store, so ``field`` must be a store on disk, not
@@ -101,6 +122,130 @@ def fit_sample_models(
     DatasetError
         A point field without normals.
     """
+    layout, blocks = fit_blocks(
+        field, models, alpha_range=alpha_range, shadow_ratio=shadow_ratio,
+        refine_normals=refine_normals, memory_bytes=memory_bytes, client=client,
+        progress=progress,
+    )  # fmt: skip
+    arrays = {
+        key: np.empty((layout.sample_count, *shape), dtype=dtype)
+        for key, (dtype, shape) in layout.arrays().items()
+    }
+    for part, fitted in blocks:
+        for key, values in fitted.items():
+            arrays[key][part] = values
+    return layout.models(arrays)
+
+
+@dataclass(frozen=True, eq=False)
+class FitLayout:
+    """A field's fit but for its per-sample arrays: what :func:`fit_blocks` fills block by block.
+
+    Attributes
+    ----------
+    kind, light_directions, camera_frame, view_direction, points, sample_count : as
+        :class:`SampleModels` has them
+    names : tuple of str, the models, in fitting order
+    basis_terms : dict of str to int, the terms B of each basis model
+    normals_fitted : bool, the parametric fits' normals were fitted (photometric stereo,
+        refinement) rather than stored
+    """
+
+    kind: str
+    light_directions: NDArray[np.float64]
+    camera_frame: NDArray[np.float64]
+    view_direction: NDArray[np.float64] | None
+    points: NDArray[np.float64] | None
+    sample_count: int
+    names: tuple[ModelName, ...]
+    basis_terms: dict[str, int]
+    normals_fitted: bool
+
+    def arrays(self) -> dict[str, tuple[np.dtype[Any], tuple[int, ...]]]:
+        """Every per-sample array, ``MODEL__ARRAY``: its dtype and its shape after the sample.
+
+        Parametric: ``normals`` (3,) float64, ``rho_d`` and ``f0`` (3,) float32, ``alpha``
+        () float32, ``lit`` (T,) uint8, ``fitted`` () bool; basis: ``coefficients`` (B, 3)
+        float32; both: ``loo_squared_error`` and ``loo_energy`` () float64. The names are
+        those of the saved fit (:mod:`processing.sample_model_store`).
+        """
+        t_count = len(self.light_directions)
+        out: dict[str, tuple[np.dtype[Any], tuple[int, ...]]] = {}
+        for name in self.names:
+            if name in BASIS_MODELS:
+                out[f"{name}__coefficients"] = (np.dtype(np.float32), (self.basis_terms[name], 3))
+            else:
+                out |= {
+                    f"{name}__normals": (np.dtype(np.float64), (3,)),
+                    f"{name}__rho_d": (np.dtype(np.float32), (3,)),
+                    f"{name}__f0": (np.dtype(np.float32), (3,)),
+                    f"{name}__alpha": (np.dtype(np.float32), ()),
+                    f"{name}__lit": (np.dtype(np.uint8), (t_count,)),
+                    f"{name}__fitted": (np.dtype(np.bool_), ()),
+                }
+            out[f"{name}__loo_squared_error"] = (np.dtype(np.float64), ())
+            out[f"{name}__loo_energy"] = (np.dtype(np.float64), ())
+        return out
+
+    def models(self, arrays: Mapping[str, NDArray[Any]]) -> SampleModels:
+        """The :class:`SampleModels` of the arrays :meth:`arrays` names, filled."""
+        fits: dict[str, Fit] = {}
+        for name in self.names:
+            loo = LooError(arrays[f"{name}__loo_squared_error"], arrays[f"{name}__loo_energy"])
+            if name in BASIS_MODELS:
+                fits[name] = BasisFit(name, arrays[f"{name}__coefficients"], loo)
+                continue
+            fits[name] = ParametricFit(
+                name=name,
+                normals=arrays[f"{name}__normals"],
+                rho_d=arrays[f"{name}__rho_d"],
+                f0=arrays[f"{name}__f0"],
+                alpha=arrays[f"{name}__alpha"],
+                lit=arrays[f"{name}__lit"],
+                fitted=arrays[f"{name}__fitted"],
+                loo=loo,
+                normals_fitted=self.normals_fitted,
+            )
+        return SampleModels(
+            kind=self.kind,
+            light_directions=self.light_directions,
+            camera_frame=self.camera_frame,
+            view_direction=self.view_direction,
+            points=self.points,
+            fits=fits,
+            sample_count=self.sample_count,
+        )
+
+
+#: One block's fitted arrays, by :meth:`FitLayout.arrays` name, rows the block's samples.
+BlockFits = dict[str, NDArray[Any]]
+
+
+def fit_blocks(
+    field: ReflectanceField,
+    models: Sequence[str] | None = None,
+    *,
+    alpha_range: tuple[float, float] = ALPHA_RANGE,
+    shadow_ratio: float = SHADOW_RATIO,
+    refine_normals: bool | None = None,
+    memory_bytes: int | None = None,
+    client: Any = None,
+    progress: bool = False,
+) -> tuple[FitLayout, Iterator[tuple[slice, BlockFits]]]:
+    """The fit of :func:`fit_sample_models`, block by block of samples, for a caller to place.
+
+    The parameters are :func:`fit_sample_models`'s; every block is fitted whole, every model
+    at once (one read of the block from the store), and nothing of the field or of the other
+    blocks' fits is held: a caller that writes each block out (:func:`processing.
+    sample_model_store.fit_to_file`) fits a field of any size in the memory of one block.
+
+    Returns
+    -------
+    layout : FitLayout
+    blocks : iterator of (slice, BlockFits)
+        The samples of each block and their arrays, in order of the samples in-process, as
+        they finish on a cluster. The checks are made before it is returned.
+    """
     names = _check_models(field, models)
     budget = budget_for(memory_bytes, client)
     if client is not None and not is_field_store(field.path):
@@ -115,39 +260,82 @@ def fit_sample_models(
         raise InputError(f"{field.path}: fitting needs at least 2 lights, the field has 1")
     lights = np.ascontiguousarray(field.light_directions, dtype=np.float64)
     frame, view, eyes, points = _viewing(field)
-    fits: dict[str, Fit] = {}
-    if field.sample_kind == "pixels":
-        assert view is not None
-        slab = field.camera_slab(0)
-        for name in names:
-            if name in BASIS_MODELS:
-                fits[name] = fit_basis(name, slab, lights @ frame.T)
-        start_normals = (
-            field.normals.astype(np.float64)
-            if field.normals is not None
-            else photometric_stereo(slab, lights, view)
-        )
-    else:
+    pixels = field.sample_kind == "pixels"
+    camera_lights = lights @ frame.T
+    terms = {name: evaluate_basis(name, camera_lights[:1]).shape[1] for name in BASIS_MODELS}
+    for name in names:
+        if name in BASIS_MODELS and field.shape[1] <= terms[name]:
+            raise InputError(
+                f"model {name!r} has {terms[name]} terms; it needs more than that many lights, "
+                f"the field has {field.shape[1]}"
+            )
+    parametric = tuple(n for n in names if n in PARAMETRIC_MODELS)
+    if parametric and pixels and field.normals is None:
+        check_stereo_lights(field.shape[1])
+    if not pixels:
         assert field.normals is not None
-        start_normals = field.normals.astype(np.float64)
-    parametric = [n for n in names if n in PARAMETRIC_MODELS]
-    if parametric:
-        refine = field.sample_kind == "pixels" if refine_normals is None else refine_normals
-        fitted = _fit_parametric(
-            field, parametric, start_normals, eyes, points, grid,
-            refine=refine, shadow_ratio=shadow_ratio, block=sample_block_size(field, budget),
-            client=client, progress=progress,
-        )  # fmt: skip
-        fits.update(fitted)
-    return SampleModels(
+    refine = pixels if refine_normals is None else refine_normals
+    loo_indices, loo_weights = (
+        leave_one_out_weights(lights) if parametric else (np.zeros((0, 0), np.int64),
+                                                          np.zeros((0, 0)))
+    )  # fmt: skip
+    job = _BlockJob(
+        names, parametric, eyes, pixels, lights, camera_lights, view, loo_indices, loo_weights,
+        grid, refine, shadow_ratio,
+    )  # fmt: skip
+    layout = FitLayout(
         kind=field.sample_kind,
         light_directions=lights,
         camera_frame=frame,
         view_direction=view,
         points=points,
-        fits={name: fits[name] for name in names},
         sample_count=field.shape[2],
+        names=names,
+        basis_terms={name: terms[name] for name in names if name in BASIS_MODELS},
+        normals_fitted=refine or (pixels and field.normals is None),
     )
+    return layout, _run_blocks(field, job, points, sample_block_size(field, budget), client,
+                               progress)  # fmt: skip
+
+
+def _run_blocks(
+    field: ReflectanceField,
+    job: _BlockJob,
+    points: NDArray[np.float64] | None,
+    block: int,
+    client: Any,
+    progress: bool,
+) -> Iterator[tuple[slice, BlockFits]]:
+    """Fit every block of ``block`` samples (see :func:`fit_blocks`)."""
+    p_count = field.shape[2]
+    blocks = [(start, min(start + block, p_count)) for start in range(0, p_count, block)]
+    stored = field.normals
+
+    def inputs(start: int, stop: int) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any] | None]:
+        part = slice(start, stop)
+        seen = np.ascontiguousarray(field.visibility[:, part].T)
+        chunk_points = np.zeros((stop - start, 3)) if points is None else points[part].copy()
+        normals = None if stored is None else np.ascontiguousarray(stored[part], np.float64)
+        return seen, chunk_points, normals
+
+    if client is None:
+        for start, stop in tqdm(blocks, desc="fit", unit="block", disable=not progress):
+            yield slice(start, stop), job.run(field.sample_block(start, stop),
+                                              *inputs(start, stop))  # fmt: skip
+        return
+    from dask.delayed import delayed
+
+    from core.cluster import compute_each
+
+    tasks = [
+        delayed(_fit_stored_block, pure=False)(
+            str(field.path), start, stop, job, *inputs(start, stop)
+        )
+        for start, stop in blocks
+    ]
+    for index, fitted in compute_each(client, tasks, progress=progress, what="fit"):
+        start, stop = blocks[index]
+        yield slice(start, stop), fitted
 
 
 def _check_models(field: ReflectanceField, models: Sequence[str] | None) -> tuple[ModelName, ...]:
@@ -211,71 +399,6 @@ def _viewing(
     return np.eye(3), None, eyes, field.points.astype(np.float64)
 
 
-def _fit_parametric(
-    field: ReflectanceField,
-    names: list[ParametricModelName],
-    start_normals: NDArray[np.float64],
-    eyes: NDArray[np.float64],
-    points: NDArray[np.float64] | None,
-    grid: NDArray[np.float64],
-    *,
-    refine: bool,
-    shadow_ratio: float,
-    block: int,
-    client: Any,
-    progress: bool,
-) -> dict[str, ParametricFit]:
-    """The parametric fits ``names``, block by block of samples (see fit_sample_models)."""
-    _, t_count, p_count = field.shape
-    pixels = field.sample_kind == "pixels"
-    lights = np.ascontiguousarray(field.light_directions, dtype=np.float64)
-    job = _BlockJob(tuple(names), eyes, pixels, lights, *leave_one_out_weights(lights), grid,
-                    refine, shadow_ratio)  # fmt: skip
-    outputs = {name: _empty_outputs(p_count, t_count) for name in names}
-    blocks = [(start, min(start + block, p_count)) for start in range(0, p_count, block)]
-
-    def inputs(start: int, stop: int) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]]:
-        part = slice(start, stop)
-        seen = np.ascontiguousarray(field.visibility[:, part].T)
-        chunk_points = np.zeros((stop - start, 3)) if points is None else points[part].copy()
-        return seen, chunk_points, np.ascontiguousarray(start_normals[part])
-
-    if client is None:
-        for start, stop in tqdm(blocks, desc="fit", unit="block", disable=not progress):
-            fitted = job.run(field.sample_block(start, stop), *inputs(start, stop))
-            _place(outputs, fitted, slice(start, stop))
-    else:
-        from dask.delayed import delayed
-
-        from core.cluster import compute_each
-
-        tasks = [
-            delayed(_fit_stored_block, pure=False)(
-                str(field.path), start, stop, job, *inputs(start, stop)
-            )
-            for start, stop in blocks
-        ]
-        for index, fitted in compute_each(client, tasks, progress=progress, what="fit"):
-            start, stop = blocks[index]
-            _place(outputs, fitted, slice(start, stop))
-    fits: dict[str, ParametricFit] = {}
-    for name in names:
-        o = outputs[name]
-        lobe = name == "lambert+ggx"
-        fits[name] = ParametricFit(
-            name=name,
-            normals=o["normal"],
-            rho_d=o["x1"].astype(np.float32),
-            f0=(o["x2"] if lobe else np.zeros_like(o["x2"])).astype(np.float32),
-            alpha=(o["alpha"] if lobe else np.ones(p_count)).astype(np.float32),
-            lit=o["lit"],
-            fitted=o["fitted"],
-            loo=LooError(o["loo"], o["energy"]),
-            normals_fitted=refine or (pixels and field.normals is None),
-        )
-    return fits
-
-
 Outputs = dict[str, NDArray[Any]]
 
 
@@ -293,16 +416,6 @@ def _empty_outputs(count: int, t_count: int) -> Outputs:
     }
 
 
-def _place(
-    outputs: dict[ParametricModelName, Outputs],
-    fitted: dict[ParametricModelName, Outputs],
-    part: slice,
-) -> None:
-    for name, arrays in fitted.items():
-        for key, values in arrays.items():
-            outputs[name][key][part] = values
-
-
 @dataclass(frozen=True, eq=False)
 class _BlockJob:
     """What fitting a block of samples needs besides the block.
@@ -311,10 +424,13 @@ class _BlockJob:
     arguments are plain arrays).
     """
 
-    names: tuple[ParametricModelName, ...]
+    names: tuple[ModelName, ...]
+    parametric: tuple[ParametricModelName, ...]
     eyes: NDArray[np.float64]
     pixels: bool
     lights: NDArray[np.float64]
+    camera_lights: NDArray[np.float64]
+    view: NDArray[np.float64] | None
     loo_indices: NDArray[np.int64]
     loo_weights: NDArray[np.float64]
     grid: NDArray[np.float64]
@@ -326,16 +442,34 @@ class _BlockJob:
         radiance: NDArray[np.float32],
         seen: NDArray[np.bool_],
         points: NDArray[np.float64],
-        normals: NDArray[np.float64],
-    ) -> dict[ParametricModelName, Outputs]:
-        """Fit each model to a block; returns each model's outputs (:func:`_empty_outputs`).
+        normals: NDArray[np.float64] | None,
+    ) -> BlockFits:
+        """Fit every model to a block; its arrays by :meth:`FitLayout.arrays` name.
 
-        Radiance (n, S, T, 3), seen (n, S), points and starting normals (n, 3).
+        Radiance (n, S, T, 3), seen (n, S), points (n, 3), stored normals (n, 3) or None (a
+        pixel field without them: photometric stereo on the block gives the starting normals).
         """
         count, t_count = radiance.shape[0], radiance.shape[2]
+        result: BlockFits = {}
+        if self.pixels:
+            # The one camera's values, light-major as the bases and photometric stereo take
+            # them: (T, n, 3).
+            view_values = radiance[:, 0].transpose(1, 0, 2)
+            for name in self.names:
+                if name in BASIS_MODELS:
+                    fit = fit_basis(name, view_values, self.camera_lights)
+                    result[f"{name}__coefficients"] = fit.coefficients
+                    result[f"{name}__loo_squared_error"] = fit.loo.squared_error
+                    result[f"{name}__loo_energy"] = fit.loo.energy
+            if self.parametric and normals is None:
+                assert self.view is not None
+                normals = photometric_stereo(view_values, self.lights, self.view)
+            del view_values
+        if not self.parametric:
+            return result
+        assert normals is not None
         steps = np.array([REFINE_STEP, REFINE_MIN_STEP])
-        result: dict[ParametricModelName, Outputs] = {}
-        for name in self.names:
+        for name in self.parametric:
             o = _empty_outputs(count, t_count)
             fit_samples(
                 radiance, seen, points, normals, self.eyes, self.pixels, self.lights,
@@ -344,7 +478,17 @@ class _BlockJob:
                 o["normal"], o["x1"], o["x2"], o["alpha"], o["lit"], o["loo"], o["energy"],
                 o["fitted"],
             )  # fmt: skip
-            result[name] = o
+            lobe = name == "lambert+ggx"
+            result |= {
+                f"{name}__normals": o["normal"],
+                f"{name}__rho_d": o["x1"].astype(np.float32),
+                f"{name}__f0": (o["x2"] if lobe else np.zeros_like(o["x2"])).astype(np.float32),
+                f"{name}__alpha": (o["alpha"] if lobe else np.ones(count)).astype(np.float32),
+                f"{name}__lit": o["lit"],
+                f"{name}__fitted": o["fitted"],
+                f"{name}__loo_squared_error": o["loo"],
+                f"{name}__loo_energy": o["energy"],
+            }
         return result
 
 
@@ -355,8 +499,8 @@ def _fit_stored_block(
     job: _BlockJob,
     seen: NDArray[np.bool_],
     points: NDArray[np.float64],
-    normals: NDArray[np.float64],
-) -> dict[ParametricModelName, Outputs]:
+    normals: NDArray[np.float64] | None,
+) -> BlockFits:
     """A Dask task: read samples start..stop from the store at ``path`` and fit them."""
     field = ReflectanceField.open(path, cached_slabs=0)
     return job.run(field.sample_block(start, stop), seen, points, normals)
@@ -365,12 +509,13 @@ def _fit_stored_block(
 def budget_for(memory_bytes: int | None, client: Any) -> int:
     """Bytes of radiance per block: as asked, else the default.
 
-    On a cluster the default is no more than a third of the smallest worker's memory limit
-    (the block, its widened copy, the outputs).
+    The default is :func:`core.memory_budget.default_memory_budget`, at most
+    :data:`FIT_BLOCK_BYTES`; on a cluster no more than a third of the smallest worker's memory
+    limit (the block, its widened copy, the outputs).
     """
     if memory_bytes is not None:
         return memory_bytes
-    budget = default_memory_budget()
+    budget = min(default_memory_budget(), FIT_BLOCK_BYTES)
     if client is not None:
         from core.cluster import worker_memory
 

@@ -119,3 +119,63 @@ def test_a_black_part_of_a_slab_is_written_not_left_out(tmp_path: Path) -> None:
     assert field.radiance.chunks == (1, 1, 4, 3)
     np.testing.assert_array_equal(field.camera_slab(0)[0], slab)
     assert check_store(path).ok
+
+
+def _pixel_store(path: Path, height: int, width: int, lights: int, chunk: int) -> np.ndarray:
+    """A pixel field of random radiance (T, H, W, 3), float16, ``chunk`` samples a chunk."""
+    rng = np.random.default_rng(5)
+    values = rng.random((lights, height, width, 3)).astype(np.float16)
+    directions = rng.normal(size=(lights, 3))
+    directions[:, 2] = np.abs(directions[:, 2]) + 0.2
+    writer = FieldStoreWriter(
+        path, points=None, normals=None,
+        light_directions=directions / np.linalg.norm(directions, axis=1, keepdims=True),
+        cameras=[PinholeCamera(0.0, 0.0, 10.0, 10.0, width, height)],
+        image_shape=(height, width), dtype="float16", sample_chunk=chunk,
+    )  # fmt: skip
+    for t in range(lights):
+        writer.write_slab(0, t, values[t].reshape(-1, 3))
+    visible = rng.random(height * width) > 0.1
+    writer.write_visibility(0, visible)
+    writer.finish()
+    return values
+
+
+def test_tiles_are_the_views_windows_read_band_by_band(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import core.field_store
+
+    values = _pixel_store(tmp_path / "p.zarr", 37, 53, 4, chunk=100)
+    field = ReflectanceField.open(tmp_path / "p.zarr")
+    # Bands of 3 rows (4 lights x 53 pixels x 3 x 2 bytes a row): a window spans several,
+    # and several windows share a band.
+    monkeypatch.setattr(core.field_store, "TILE_READ_BYTES", 3 * 4 * 53 * 3 * 2)
+    origins = [(0, 0), (2, 40), (27, 5), (20, 43)]
+    tiled = field.tiles(origins, 10, columns=3)
+    assert tiled.image_shape == (20, 30) and tiled.shape == (1, 4, 600)
+    assert tiled.cameras[0].width == 30 and tiled.cameras[0].height == 20
+    assert tiled.provenance["tiles_of"]["origins"] == [list(o) for o in origins]
+    mosaic = tiled.camera_slab(0).reshape(4, 20, 30, 3)
+    seen = tiled.visibility[0].reshape(20, 30)
+    visible = field.visibility[0].reshape(37, 53)
+    for index, (row, column) in enumerate(origins):
+        y, x = index // 3 * 10, index % 3 * 10
+        np.testing.assert_array_equal(
+            mosaic[:, y : y + 10, x : x + 10],
+            values[:, row : row + 10, column : column + 10].astype(np.float32),
+        )
+        np.testing.assert_array_equal(seen[y : y + 10, x : x + 10],
+                                      visible[row : row + 10, column : column + 10])  # fmt: skip
+    # The mosaic's last cell holds no window: black, and no pixel of it counts.
+    assert not mosaic[:, 10:, 10:].any() and not seen[10:, 10:].any()
+    np.testing.assert_array_equal(tiled.light_directions, field.light_directions)
+
+
+def test_tiles_outside_the_view_or_of_points_are_refused(tmp_path: Path, store: Path) -> None:
+    _pixel_store(tmp_path / "p.zarr", 12, 16, 2, chunk=64)
+    field = ReflectanceField.open(tmp_path / "p.zarr")
+    with pytest.raises(InputError, match=r"at row 3, column 8 is not inside the 16 x 12 view"):
+        field.tiles([(3, 8)], 10, columns=1)
+    with pytest.raises(InputError, match="need a field of pixels"):
+        ReflectanceField.open(store).tiles([(0, 0)], 4, columns=1)

@@ -17,7 +17,7 @@ from core.errors import DatasetError, InputError
 from core.field_integrity import check_store
 from core.field_store import ReflectanceField
 from processing.sample_model_store import read_sample_models
-from processing.sample_models import SampleModels, fit_sample_models, sample_block_size
+from processing.sample_models import BasisFit, SampleModels, fit_sample_models, sample_block_size
 from sim.field import field_cameras, simulate_field
 from tests.cluster_faults import kill_a_worker_mid_run
 
@@ -199,3 +199,137 @@ def test_rig_fit_on_a_running_scheduler_and_worker(
             if process is not None:
                 process.terminate()
                 process.wait(timeout=30)
+
+
+# --- a field of pixels (an RTI capture) ----------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def pixels(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An imported RTI capture: 40 x 30 pixels under 20 lights, a glossy bumpy relief."""
+    from core.directions import hemisphere_layout
+    from processing.rti import import_rti, write_rti_capture
+
+    tmp = tmp_path_factory.mktemp("pixels")
+    lights = hemisphere_layout(20, "fibonacci")
+    y, x = np.mgrid[0:30, 0:40] / 5.0
+    normals = np.stack([0.5 * np.sin(x), 0.5 * np.cos(1.3 * y), np.ones_like(x)], axis=2)
+    normals /= np.linalg.norm(normals, axis=2, keepdims=True)
+    cosine = np.einsum("hwc,tc->thw", normals, lights)
+    halfway = lights + np.array([0.0, 0.0, 1.0])
+    halfway /= np.linalg.norm(halfway, axis=1, keepdims=True)
+    lobe = np.clip(np.einsum("hwc,tc->thw", normals, halfway), 0.0, None) ** 40
+    albedo = 0.3 + 0.2 * np.sin(x[:, :, None] * np.array([1.0, 1.7, 2.3]))
+    images = albedo[None] * np.clip(cosine, 0.0, None)[..., None] + 0.3 * lobe[..., None]
+    lp = write_rti_capture(tmp, "relief", images, lights, scale=0.8)
+    return import_rti(lp, tmp / "relief.zarr", progress=False).path
+
+
+PIXEL_BYTES = 20 * 3 * 4  # float32 radiance of one pixel under 20 lights
+
+
+@pytest.fixture(scope="module")
+def whole_pixel_fit(pixels: Path) -> SampleModels:
+    """Every model a pixel field has, every pixel in one block."""
+    field = ReflectanceField.open(pixels)
+    assert sample_block_size(field, 1200 * PIXEL_BYTES) == 1200
+    return fit_sample_models(field, memory_bytes=1200 * PIXEL_BYTES)
+
+
+def _assert_same_models(a: SampleModels, b: SampleModels) -> None:
+    assert list(a.fits) == list(b.fits)
+    for name, fit in a.fits.items():
+        other = b.fits[name]
+        assert type(fit) is type(other)
+        if isinstance(fit, BasisFit) and isinstance(other, BasisFit):
+            np.testing.assert_array_equal(fit.coefficients, other.coefficients, err_msg=name)
+        else:
+            for key in ("normals", "rho_d", "f0", "alpha", "lit", "fitted"):
+                np.testing.assert_array_equal(getattr(fit, key), getattr(other, key),
+                                              err_msg=f"{name} {key}")  # fmt: skip
+        np.testing.assert_array_equal(fit.loo.squared_error, other.loo.squared_error)
+        np.testing.assert_array_equal(fit.loo.energy, other.loo.energy)
+
+
+def test_a_pixel_fit_in_blocks_equals_the_fit_in_one(
+    pixels: Path, whole_pixel_fit: SampleModels, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import processing.sample_models.bases
+    import processing.sample_models.stereo
+
+    field = ReflectanceField.open(pixels)
+    assert list(whole_pixel_fit.fits) == ["lambert", "lambert+ggx", "ptm", "hsh2", "hsh3"]
+    # Blocks of 170 pixels (7 of them, the last short), and within a block the bases and
+    # photometric stereo in chunks of 50: each pixel's fit is its own.
+    monkeypatch.setattr(processing.sample_models.bases, "BASIS_CHUNK", 50)
+    monkeypatch.setattr(processing.sample_models.stereo, "STEREO_CHUNK", 50)
+    blocks = fit_sample_models(field, memory_bytes=170 * PIXEL_BYTES)
+    _assert_same_models(whole_pixel_fit, blocks)
+
+
+def test_a_streamed_fit_file_holds_the_fit_held_in_memory(
+    pixels: Path, whole_pixel_fit: SampleModels, tmp_path: Path
+) -> None:
+    from processing.sample_model_store import fit_to_file, write_sample_models
+
+    field = ReflectanceField.open(pixels)
+    layout = fit_to_file(field, tmp_path / "streamed.npz", memory_bytes=170 * PIXEL_BYTES)
+    assert layout.names == tuple(whole_pixel_fit.fits)
+    write_sample_models(tmp_path / "held.npz", whole_pixel_fit, field)
+    with np.load(tmp_path / "streamed.npz") as a, np.load(tmp_path / "held.npz") as b:
+        assert sorted(a.files) == sorted(b.files)
+        for key in a.files:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+            assert a[key].dtype == b[key].dtype, key
+    assert [p.name for p in tmp_path.iterdir()] != [] and not list(tmp_path.glob(".*parts"))
+    _assert_same_models(whole_pixel_fit, read_sample_models(tmp_path / "streamed.npz", field))
+
+
+def test_reading_some_models_reads_only_them(
+    pixels: Path, whole_pixel_fit: SampleModels, tmp_path: Path
+) -> None:
+    from processing.sample_model_store import models_for_field, write_sample_models
+
+    field = ReflectanceField.open(pixels)
+    path = write_sample_models(tmp_path / "all.npz", whole_pixel_fit, field)
+    some = read_sample_models(path, field, models=["hsh2", "lambert"])
+    assert list(some.fits) == ["lambert", "hsh2"]  # in the file's order
+    np.testing.assert_array_equal(
+        some.fit("hsh2").coefficients,  # type: ignore[union-attr]
+        whole_pixel_fit.fit("hsh2").coefficients,  # type: ignore[union-attr]
+    )
+    assert list(models_for_field(field, path, models=["ptm"]).fits) == ["ptm"]
+
+
+def test_rig_fit_streams_a_pixel_field_in_blocks(
+    pixels: Path, whole_pixel_fit: SampleModels, tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    target = tmp_path / "fit.npz"
+    argv = ["fit", str(pixels), "--max-memory", str(300 * PIXEL_BYTES), "-o", str(target),
+            "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    said = capsys.readouterr().err
+    assert "fitting 1200 samples (1 cameras x 20 lights) in blocks of 300" in said
+    _assert_same_models(whole_pixel_fit, read_sample_models(target, ReflectanceField.open(pixels)))
+
+
+def test_a_pixel_field_streamed_from_a_cluster_is_the_same(
+    pixels: Path, whole_pixel_fit: SampleModels, tmp_path: Path, client: Any
+) -> None:
+    from processing.sample_model_store import fit_to_file
+
+    field = ReflectanceField.open(pixels)
+    # Blocks finish in any order on a cluster: each is written at its own place.
+    fit_to_file(field, tmp_path / "fit.npz", memory_bytes=100 * PIXEL_BYTES, client=client)
+    _assert_same_models(whole_pixel_fit, read_sample_models(tmp_path / "fit.npz", field))
+
+
+def test_too_few_lights_for_photometric_stereo_is_refused_before_any_block(
+    pixels: Path,
+) -> None:
+    part = ReflectanceField.open(pixels).subset(lights=np.arange(3))
+    with pytest.raises(InputError, match="photometric stereo needs at least 3 lights"):
+        fit_sample_models(part, models=["lambert"])
+    with pytest.raises(InputError, match="model 'hsh2' has 4 terms"):
+        fit_sample_models(part, models=["hsh2"])

@@ -337,7 +337,8 @@ def test_the_real_capture_imports_as_a_pixel_field(loewenkopf: ReflectanceField)
     field = ReflectanceField.open(loewenkopf.path)
     assert field.image_shape == (43, 64)
     assert field.shape == (1, 240, 43 * 64)
-    assert field.sample_kind == "pixels" and field.dtype == np.float32
+    # 8-bit JPEGs: float16 by default (every level keeps a value of its own)
+    assert field.sample_kind == "pixels" and field.dtype == np.float16
     assert field.points is None and field.normals is None
     assert field.visibility.shape == (1, 43 * 64) and field.visibility.all()
     np.testing.assert_allclose(np.linalg.norm(field.light_directions, axis=1), 1.0, atol=1e-12)
@@ -354,7 +355,7 @@ def test_the_real_capture_imports_as_a_pixel_field(loewenkopf: ReflectanceField)
     slab = field.camera_slab(0)
     for t in (0, 117, 239):
         image = read_linear(LOEWENKOPF / lights.files[t])
-        np.testing.assert_array_equal(slab[t].reshape(43, 64, 3), image)
+        np.testing.assert_array_equal(slab[t].reshape(43, 64, 3), image.astype(np.float16))
     assert not list(loewenkopf.path.parent.glob(".*partial*"))
 
 
@@ -514,12 +515,60 @@ def test_a_16_bit_tiff_is_linear_by_default(tmp_path: Path) -> None:
     np.testing.assert_allclose(_images(field), 0.2, rtol=0, atol=1 / 65535)
 
 
+@pytest.mark.parametrize("transfer", ["srgb", "linear"])
+def test_8_bit_levels_are_stored_as_float16_by_default_and_lose_nothing(
+    tmp_path: Path, transfer: str
+) -> None:
+    from core.colour import linear_to_srgb
+
+    levels = np.arange(256, dtype=np.uint8).reshape(16, 16)
+    picture = np.stack([levels, levels.T, 255 - levels], axis=2)
+    lp = _capture(tmp_path, [picture, picture[::-1]])
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False, transfer=transfer)  # type: ignore[arg-type]
+    assert field.dtype == np.float16
+    assert "stored as float16 (8-bit levels" in field.provenance["assumed"]
+    stored = _images(field)
+    # Each level is the float16 of its float32 value, and all 256 are told apart: decoding
+    # them back gives every level as it was.
+    wide = import_rti(lp, tmp_path / "g.zarr", progress=False, transfer=transfer, dtype="float32")  # type: ignore[arg-type]
+    assert wide.dtype == np.float32
+    np.testing.assert_array_equal(stored, _images(wide).astype(np.float16))
+    encoded = linear_to_srgb(stored.astype(np.float32)) if transfer == "srgb" else stored
+    back = np.round(np.asarray(encoded) * 255.0)
+    np.testing.assert_array_equal(back, np.stack([picture, picture[::-1]]).astype(np.float64))
+    assert len(np.unique(stored[0, :, :, 0])) == 256
+
+
+def test_16_bit_images_and_divided_images_stay_float32(tmp_path: Path) -> None:
+    sixteen = _capture(tmp_path / "a", [_flat(13107, np.uint16)] * 3)
+    assert import_rti(sixteen, tmp_path / "a.zarr", progress=False).dtype == np.float32
+    divided = _capture(tmp_path / "b", [_flat(100, np.uint8)] * 3, extra=["2", "0.5", "1"])
+    field = import_rti(divided, tmp_path / "b.zarr", progress=False)
+    assert field.dtype == np.float32 and "stored as float32" in field.provenance["assumed"]
+    asked = import_rti(divided, tmp_path / "c.zarr", progress=False, dtype="float16")
+    assert asked.dtype == np.float16
+
+
+def test_an_image_that_fails_to_decode_ahead_is_named_and_leaves_no_store(
+    tmp_path: Path,
+) -> None:
+    # Later images decode on a thread while earlier ones are written: the failure still names
+    # the image's line, and the store is not made.
+    images = [_flat(10 * t, np.uint8) for t in range(6)]
+    lp = _capture(tmp_path, images)
+    (tmp_path / "img" / "4.png").write_bytes(b"not a png")
+    with pytest.raises(DatasetError, match=r"cap\.lp, line 6: .*4\.png"):
+        import_rti(lp, tmp_path / "f.zarr", progress=False)
+    assert not (tmp_path / "f.zarr").exists()
+    assert not list(tmp_path.glob(".f.zarr.*"))
+
+
 @pytest.mark.parametrize("suffix", [".png", ".jpg"])
 def test_8_bit_images_are_srgb_by_default_and_linear_when_asked(
     tmp_path: Path, suffix: str
 ) -> None:
     lp = _capture(tmp_path, [_flat(128, np.uint8)] * 2, suffix=suffix)
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    field = import_rti(lp, tmp_path / "f.zarr", progress=False, dtype="float32")
     # 128/255 encoded is 0.2158605 linear (a JPEG of a flat patch keeps the value exactly).
     np.testing.assert_allclose(_images(field), 0.2158605, rtol=1e-6)
     assert field.provenance["transfer"] == {
@@ -530,7 +579,7 @@ def test_8_bit_images_are_srgb_by_default_and_linear_when_asked(
         "rule": "auto: 8-bit is sRGB, 16-bit and float are linear",
     }
     linear = import_rti(lp, tmp_path / "g.zarr", progress=False, transfer="linear")
-    np.testing.assert_allclose(_images(linear), 128 / 255, rtol=1e-6)
+    np.testing.assert_array_equal(_images(linear), np.float16(128 / 255))  # auto: float16
 
 
 def test_the_real_capture_records_what_it_assumed(loewenkopf: ReflectanceField) -> None:
@@ -541,7 +590,8 @@ def test_the_real_capture_records_what_it_assumed(loewenkopf: ReflectanceField) 
         "rti dirs.lp: 240 8-bit images decoded as sRGB (auto: 8-bit is sRGB, 16-bit and float "
         "are linear; transfer 'srgb' or 'linear' overrides); mask: none, every pixel counts; "
         "intensities: none, the lights are taken as equal; below the horizon: blocked by the "
-        "base (environment light from below is dropped)"
+        "base (environment light from below is dropped); stored as float16 (8-bit levels: "
+        "float16 keeps each one distinct, nothing is lost)"
     )
     assert loewenkopf.below_horizon == "blocked"
 
@@ -638,7 +688,7 @@ def test_a_mask_sidecar_is_found_and_an_explicit_mask_wins(tmp_path: Path) -> No
     with open_field_or_rti(tmp_path, mask=tmp_path / "all.png", transfer="linear") as opened:
         assert opened.visibility.all()
         assert opened.provenance["transfer"]["applied"] == "linear"
-        np.testing.assert_allclose(_images(opened), 100 / 255, rtol=1e-6)
+        np.testing.assert_array_equal(_images(opened), np.float16(100 / 255))
 
 
 def test_bad_masks_are_refused_and_leave_no_store(tmp_path: Path) -> None:
@@ -753,9 +803,9 @@ def test_tga_and_bmp_captures_import(tmp_path: Path) -> None:
     Image.fromarray(pictures[0]).save(tmp_path / "img" / "a.tga", compression="tga_rle")
     assert cv2.imwrite(str(tmp_path / "img" / "b.bmp"), pictures[1][:, :, ::-1])
     (tmp_path / "t.lp").write_text("2\nimg/a.tga 0 0 1\nimg/b.bmp 0.5 0 1\n", encoding="utf-8")
-    field = import_rti(tmp_path / "t.lp", tmp_path / "f.zarr", progress=False)
+    field = import_rti(tmp_path / "t.lp", tmp_path / "f.zarr", progress=False, dtype="float32")
     expected = srgb_to_linear(np.array(pictures, dtype=np.float32) / 255.0)
-    np.testing.assert_allclose(_images(field), expected, rtol=1e-6)
+    np.testing.assert_array_equal(_images(field), expected)  # the table is the curve, bit for bit
     assert field.provenance["transfer"]["bit_depth"] == "8-bit"
 
 

@@ -134,3 +134,102 @@ def test_a_local_cluster_scores_the_same(
     assert main(argv) == 0
     assert "running on a local Dask cluster of 1 worker," in capsys.readouterr().err
     assert set(json.loads(out.read_text())["methods"]) == {"nearest", "ptm"}
+
+
+# --- a view too large to score whole: tiles of it ----------------------------------------
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An RTI capture of 96 x 64 pixels under 16 lights (a bumpy diffuse relief, 16-bit)."""
+    from processing.rti import write_rti_capture
+
+    tmp = tmp_path_factory.mktemp("large-view")
+    lights = hemisphere_layout(16, "fibonacci")
+    y, x = np.mgrid[0:64, 0:96] / 8.0
+    normals = np.stack([0.4 * np.sin(x), 0.4 * np.cos(1.3 * y), np.ones_like(x)], axis=2)
+    normals /= np.linalg.norm(normals, axis=2, keepdims=True)
+    albedo = 0.3 + 0.2 * np.sin(x[:, :, None] * np.array([1.0, 1.7, 2.3]))
+    shading = np.clip(np.einsum("hwc,tc->thw", normals, lights), 0.0, None)
+    return write_rti_capture(tmp, "relief", albedo[None] * shading[:, :, :, None], lights,
+                             scale=1.0)  # fmt: skip
+
+
+def test_a_large_view_is_sampled_by_tiles_spread_evenly() -> None:
+    from render.evaluation import TILE_SIDE, pixel_sample
+
+    assert pixel_sample((43, 64)) is None  # the bundled capture is scored whole
+    assert pixel_sample(None) is None
+    sample = pixel_sample((4000, 6000))
+    assert sample is not None and sample.side == TILE_SIDE and sample.columns == 2
+    assert sample.origins == ((872, 1372), (872, 4372), (2872, 1372), (2872, 4372))
+    assert "4 tiles of 256 x 256" in sample.note() and "262,144 of its 24,000,000" in sample.note()
+    small = pixel_sample((64, 96), max_pixels=1024, side=16)
+    assert small is not None and small.pixels == 1024 and len(small.origins) == 4
+    mask = small.mask(None)
+    # Half an SSIM window beside the seams is left out, the tiles' outer edges are not.
+    assert mask.shape == (32, 32) and mask[0, 0] and mask[31, 31]
+    assert not mask[:, 11:21].any() and not mask[11:21].any()
+
+
+def test_tiles_score_what_the_whole_view_predicts_there(capture: Path, tmp_path: Path) -> None:
+    from processing.image_quality import image_quality
+    from processing.rti import import_rti
+    from render.evaluation import held_out_split
+    from render.light_prediction import make_predictor
+
+    field = import_rti(capture, tmp_path / "relief.zarr", progress=False)
+    whole = held_out_split(field, "every-other")
+    assert whole.sample is None and whole.fit.image_shape == (64, 96)
+    pair = held_out_split(field, "every-other", max_pixels=1024, side=16)
+    assert pair.sample is not None and pair.fit.image_shape == (32, 32)
+    assert pair.test_lights is not None
+    np.testing.assert_array_equal(pair.test_lights, np.arange(1, 16, 2))
+    methods = ["nearest", "ptm", "lambert"]
+    result = evaluate(pair.fit, pair.test, methods, mask=pair.mask, sample=pair.sample)
+    assert "scored on 4 tiles of 16 x 16" in result.markdown()
+    assert json.loads(json.dumps(result.to_json()))["pixels"]["side"] == 16
+    # Every method predicts each pixel from its own values: the tiles' scores are those of the
+    # whole view's predictions, cut into the same tiles.
+    sample = pair.sample
+
+    def tiled(images: np.ndarray) -> np.ndarray:  # (Q, 64, 96, 3) -> (Q, 32, 32, 3)
+        out = np.zeros((len(images), 32, 32, 3), dtype=np.float32)
+        for index, (row, column) in enumerate(sample.origins):
+            y, x = index // 2 * 16, index % 2 * 16
+            out[:, y : y + 16, x : x + 16] = images[:, row : row + 16, column : column + 16]
+        return out
+
+    truth = tiled(whole.test.camera_slab(0).reshape(-1, 64, 96, 3))
+    counted = sample.mask(None) & pair.fit.visibility[0].reshape(32, 32)
+    for method in result.methods:
+        predicted = make_predictor(whole.fit, method.name).predict(0, whole.test.light_directions)
+        expected = tiled(predicted.reshape(-1, 64, 96, 3))
+        for got, image, reference in zip(method.per_image, expected, truth, strict=True):
+            want = image_quality(image, reference, counted)
+            assert got.psnr == pytest.approx(want.psnr, rel=1e-6, abs=1e-9), method.name
+            assert got.ssim == pytest.approx(want.ssim, rel=1e-6), method.name
+            assert got.rel_rmse == pytest.approx(want.rel_rmse, rel=1e-5, abs=1e-9), method.name
+
+
+def test_rig_evaluate_says_it_scored_tiles(
+    capture: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    import render.evaluation
+    from app.cli import main
+
+    monkeypatch.setattr(render.evaluation, "EVALUATE_PIXELS", 1024)
+    monkeypatch.setattr(render.evaluation, "TILE_SIDE", 16)
+    out = tmp_path / "scores.json"
+    argv = ["evaluate", str(capture), "--test", str(capture), "--methods", "nearest",
+            "--json", str(out), "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "Large view, pixels: scored on 4 tiles of 16 x 16" in printed
+    document = json.loads(out.read_text())
+    # The measured lights themselves, on the tiles of both: exact.
+    assert document["methods"]["nearest"]["mean"]["psnr"] is None or math.isinf(
+        document["methods"]["nearest"]["mean"]["psnr"]
+    )
+    assert len(document["pixels"]["origins"]) == 4
