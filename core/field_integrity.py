@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 import zarr
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.errors import DatasetError
+from core.progress import progress_bar
 
 __all__ = [
     "CHUNK_MEANING",
@@ -257,7 +257,7 @@ def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
     digests: list[bytes] = []
     unreadable = False
     keys = [(a, b) for a in range(s) for b in range(t)]
-    for a, b in tqdm(keys, desc="verify", unit="slab", disable=not progress):
+    for a, b in progress_bar(keys, desc="verify", unit="slab", show=progress):
         if (a, b) in incomplete:
             unreadable = True
             continue

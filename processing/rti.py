@@ -34,7 +34,6 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from tqdm import tqdm
 
 from core.camera_model import PinholeCamera, camera_to_rig, rig_to_camera
 from core.colour import linear_to_srgb
@@ -52,6 +51,7 @@ from core.image_io import (
     write_linear16_tiff,
     write_srgb8,
 )
+from core.progress import progress_bar
 from processing.rti_lp import (
     INTENSITY_SIDECARS,
     LightPositions,
@@ -383,7 +383,7 @@ def import_rti(
         },
     )
     try:
-        steps = tqdm(total=len(paths), desc="rti", unit="image", disable=not progress)
+        steps = progress_bar(total=len(paths), desc="rti", unit="image", show=progress)
         buffer: NDArray[np.floating] | None = None
         for index, pixels in enumerate(_decoded(paths, first, lp_file, lights)):
             where = f"{lp_file}, line {lights.line(index)}"

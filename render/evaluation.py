@@ -34,12 +34,12 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.errors import InputError, RigError
 from core.field_store import ReflectanceField, is_field_store
 from core.image_io import TransferChoice
 from core.point_spacing import point_spacing
+from core.progress import progress_bar
 from processing.image_quality import (
     SSIM_WINDOW,
     ImageQuality,
@@ -661,7 +661,7 @@ def evaluate(
     if client is None:
         results = [
             _score_method(fit, test, name, scale, views, images)
-            for name in tqdm(methods, desc="evaluate", unit="method", disable=not progress)
+            for name in progress_bar(methods, desc="evaluate", unit="method", show=progress)
         ]
     else:
         from dask.delayed import delayed

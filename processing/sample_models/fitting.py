@@ -16,12 +16,12 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from core.camera_model import rig_to_camera
 from core.errors import DatasetError, InputError
 from core.field_store import ReflectanceField, is_field_store
 from core.memory_budget import default_memory_budget, format_size
+from core.progress import progress_bar
 from processing.sample_models.bases import evaluate_basis, fit_basis
 from processing.sample_models.fit_kernel import fit_samples
 from processing.sample_models.fits import (
@@ -319,7 +319,7 @@ def _run_blocks(
         return seen, chunk_points, normals
 
     if client is None:
-        for start, stop in tqdm(blocks, desc="fit", unit="block", disable=not progress):
+        for start, stop in progress_bar(blocks, desc="fit", unit="block", show=progress):
             yield slice(start, stop), job.run(field.sample_block(start, stop),
                                               *inputs(start, stop))  # fmt: skip
         return
