@@ -19,6 +19,10 @@ __all__ = [
     "SCHEMES",
     "SEQUENCES",
     "SPLITS",
+    "WEB_MODELS",
+    "WEB_NEURAL_SECONDS",
+    "WEB_TILE_SIZE",
+    "WEB_TILE_THRESHOLD",
 ]
 
 #: :data:`processing.sampling.SAMPLERS`: the panorama samplers.
@@ -66,3 +70,11 @@ SEQUENCES = ("environment", "turntable")
 #: ``render.relight_mode.MOST_ACCURATE_MODELS.grid_height``: the grid the models sum a
 #: panorama into by default.
 MODEL_GRID_HEIGHT = 64
+
+#: :data:`render.web_export.WEB_MODELS`: the models ``rig export-web`` writes.
+WEB_MODELS = ("ptm", "hsh2", "hsh3", "neural")
+#: :data:`render.web_export.TILE_SIZE`, ``TILE_THRESHOLD`` and ``NEURAL_SECONDS``: the
+#: export's deep-zoom tile side, the side above which it tiles, the neural fit's budget (s).
+WEB_TILE_SIZE = 254
+WEB_TILE_THRESHOLD = 2048
+WEB_NEURAL_SECONDS = 120.0

@@ -105,12 +105,21 @@ def test_every_help_is_printed_without_importing_the_library() -> None:
         ("SCHEMES", "render.relighter", "SCHEMES"),
         ("SPLITS", "render.light_splits", "SPLITS"),
         ("SEQUENCES", "render.sequence", "SEQUENCES"),
+        ("WEB_MODELS", "render.web_export", "WEB_MODELS"),
     ],
 )
 def test_the_choices_are_the_library_names(name: str, owner: str, attribute: str) -> None:
     import importlib
 
     assert getattr(cli_choices, name) == tuple(getattr(importlib.import_module(owner), attribute))
+
+
+def test_the_web_exports_numbers_are_the_library_ones() -> None:
+    from render import web_export
+
+    assert cli_choices.WEB_TILE_SIZE == web_export.TILE_SIZE
+    assert cli_choices.WEB_TILE_THRESHOLD == web_export.TILE_THRESHOLD
+    assert cli_choices.WEB_NEURAL_SECONDS == web_export.NEURAL_SECONDS
 
 
 def test_the_models_default_grid_is_the_library_one() -> None:

@@ -37,8 +37,9 @@ from core.sample_data import rti_capture_path
 from processing.rti import import_rti
 from processing.rti_lp import read_lp
 from processing.sample_models import evaluate_basis
-from render.light_prediction import bound_factor, make_predictor
-from render.web_export import WebExport, export_web
+from render.light_prediction import bound_factor, eight_bit_levels, make_predictor
+from render.web_export import automatic_tile_size, openlime_display
+from render.web_export.export import WebExport, export_web
 
 #: Query lights in the camera frame (x right, y up, z toward the camera), all above the
 #: viewer's HSH elevation floor of 0.15 rad; the last two between the measured ones.
@@ -118,8 +119,10 @@ def lion(tmp_path_factory: pytest.TempPathFactory) -> ReflectanceField:
 
 @pytest.fixture(scope="module")
 def lossless(lion: ReflectanceField, tmp_path_factory: pytest.TempPathFactory) -> WebExport:
+    # Single PNG images (OpenLIME reads PNG only as tiles; the format is the same): the
+    # decoder below reads them directly.
     out = tmp_path_factory.mktemp("png") / "web"
-    return export_web(lion, out, models=("ptm", "hsh2", "hsh3"), image_format="png")
+    return export_web(lion, out, models=("ptm", "hsh2", "hsh3"), image_format="png", tiles=False)
 
 
 def _pixel_field(path: Path, values: np.ndarray, lights: np.ndarray, shape: tuple[int, int]):
@@ -330,3 +333,110 @@ def test_the_command_writes_an_rti_capture(
     with pytest.raises(SystemExit):
         parser.parse_args(["export-web", "x", "-o", str(out), "--quality", "0"])
     assert "JPEG quality must be 1..100" in capsys.readouterr().err
+
+
+def test_png_planes_are_written_where_openlime_reads_them(
+    lion: ReflectanceField, tmp_path: Path
+) -> None:
+    # OpenLIME's image layout asks for plane_N.jpg (Layout.imageUrl): PNG planes are tiled,
+    # and the deep-zoom .dzi names their format (LayoutTiles.initDeepzoom).
+    tiled = export_web(lion, tmp_path / "a", models=("ptm",), image_format="png")
+    assert tiled.tile_size == 62 and tiled.models[0].levels == 2
+    assert any("deep-zoom tiles" in note and "plane_N.jpg" in note for note in tiled.notes)
+    assert any("tiles of 62 pixels" in note for note in tiled.notes)
+    folder = tiled.models[0].folder
+    assert [p.name for p in tiled.models[0].files] == [f"plane_{j}.dzi" for j in range(6)]
+    assert not list(folder.glob("plane_*.png"))
+    assert ElementTree.parse(folder / "plane_0.dzi").getroot().get("Format") == "png"
+    assert (folder / "plane_0_files" / "1" / "1_0.png").is_file()
+    assert json.loads((folder / "info.json").read_text())["format"] == "png"
+    # Asked for single PNG images: written (a viewer of one's own reads them), and said.
+    single = export_web(lion, tmp_path / "b", models=("ptm",), image_format="png", tiles=False)
+    assert single.tile_size == 0 and (single.models[0].folder / "plane_0.png").is_file()
+    assert any("cannot load them" in note for note in single.notes)
+    # JPEG planes of a small image stay single images, with nothing to say.
+    plain = export_web(lion, tmp_path / "c", models=("ptm",))
+    assert plain.tile_size == 0 and plain.notes == ()
+
+
+def test_the_tile_size_is_chosen_below_the_longest_side(lion: ReflectanceField, tmp_path: Path):
+    assert automatic_tile_size(64, 43, 1) == 62  # 64 - 2: an inner tile is 64 wide
+    assert automatic_tile_size(43, 64, 0) == 32
+    assert automatic_tile_size(255, 10, 1) == 254  # longer than the default: the default
+    assert automatic_tile_size(254, 10, 1) == 126
+    assert automatic_tile_size(3, 1, 1) == 2
+    with pytest.raises(InputError, match="2 x 2 pixels is too small"):
+        automatic_tile_size(2, 2, 1)
+    result = export_web(lion, tmp_path / "web", models=("ptm",), tiles=True)
+    assert result.tile_size == 62 and result.models[0].levels == 2
+    root = ElementTree.parse(result.models[0].folder / "plane_0.dzi").getroot()
+    assert (root.get("Format"), root.get("TileSize")) == ("jpg", "62")
+
+
+def test_bands_give_the_export_of_the_whole_view(
+    lion: ReflectanceField, lossless: WebExport, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import render.web_export.export as module
+
+    monkeypatch.setattr(module, "CHUNK_BYTES", 240 * 12 * 100)  # bands of 100 pixels
+    assert module._band_size(lion, 0) == 100
+    banded = export_web(
+        lion, tmp_path / "web", models=("ptm", "hsh2", "hsh3"), image_format="png", tiles=False
+    )
+    for written, whole in zip(banded.models, lossless.models, strict=True):
+        for a, b in zip(written.files, whole.files, strict=True):
+            x, y = _read_rgb(a).astype(int), _read_rgb(b).astype(int)
+            assert np.abs(x - y).max() <= 1 and (x == y).mean() > 0.999, a
+    assert (
+        np.abs(_read_rgb(banded.normals_png).astype(int) - _read_rgb(lossless.normals_png)).max()
+        <= 1
+    )
+
+
+def test_the_view_is_read_a_band_at_a_time(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import render.web_export.export as module
+
+    height, width = 30, 40
+    lights = hemisphere_layout(14, "fibonacci")
+    lights = lights[lights[:, 2] > 0.2]
+    rng = np.random.default_rng(4)
+    values = rng.uniform(0.05, 2.0, (len(lights), height * width, 3))
+    field = _pixel_field(tmp_path / "f.zarr", values, lights, (height, width))
+    band = 100
+    monkeypatch.setattr(module, "CHUNK_BYTES", len(lights) * 12 * band)
+    reads: list[int] = []
+    original = ReflectanceField.camera_radiance
+
+    def counted(self: ReflectanceField, camera: int, samples: slice = slice(None)):
+        out = original(self, camera, samples)
+        reads.append(out.shape[1])
+        return out
+
+    def whole(self: ReflectanceField, camera: int):
+        raise AssertionError("the whole view was read")
+
+    monkeypatch.setattr(ReflectanceField, "camera_radiance", counted)
+    monkeypatch.setattr(ReflectanceField, "camera_slab", whole)
+    result = export_web(field, tmp_path / "web", models=("ptm", "hsh2"))
+    assert max(reads) == band
+    # One pass for the display scale (a simulated field), one to fit: every pixel twice.
+    assert sum(reads) == 2 * height * width
+    assert result.scale > 0 and len(result.models) == 2
+
+
+def test_openlime_display_blacks_out_the_shadows(lion: ReflectanceField) -> None:
+    # Canvas.js: an 8-bit linear buffer (Shader.js srgb2linear = pow(c, 2.2)), then
+    # pow(c, 1 / 2.2) to the canvas. Worked by hand: 14/255 -> 255 (14/255)^2.2 = 0.42 -> 0;
+    # 15 -> 0.50 -> 1 -> 255 (1/255)^(1/2.2) = 20.5 -> 21; 25 -> 1.51 -> 2 -> 28.
+    table = openlime_display(np.arange(256))
+    assert table[14] == 0 and table[15] == 21 and table[24] == 21 and table[25] == 28
+    assert table[0] == 0 and table[255] == 255 and (np.diff(table.astype(int)) >= 0).all()
+    assert np.abs(table.astype(int) - np.arange(256)).max() <= 14
+    # Its effect on the bundled capture's own images (docs/web-export.md states it).
+    levels = eight_bit_levels(lion.camera_radiance(0)).astype(np.uint8)
+    shown = openlime_display(levels)
+    blacked = float(np.mean((shown == 0) & (levels > 0)))
+    error = np.mean((shown.astype(float) - levels) ** 2)
+    psnr = 10 * math.log10(255**2 / error)
+    assert 0.21 < blacked < 0.23  # measured 0.218
+    assert 38.8 < psnr < 39.3  # measured 39.0 dB
