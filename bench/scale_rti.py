@@ -11,7 +11,9 @@ capture's do), then runs each stage as its own process, the way a user runs it:
   hsh3), written to the fit file beside the store;
 - ``evaluate``: ``rig evaluate STORE --split every-other`` (the methods of ``--methods``);
 - ``export-web``: ``rig export-web STORE -o DIR --models ptm``;
-- ``view``: ``rig view STORE``, stopped once it prints its address (or at ``--view-wait``).
+- ``view``: ``rig view STORE``, stopped once its light view (the page's GPU relighting: the
+  HSH and PTM fits exported for the page) answers ready on ``/api/light``, or at
+  ``--view-wait``.
 
 For each it records the wall time, seconds per megapixel and the stage's peak resident memory
 (``wait4``: the process and the children it waited for). A stage whose resident memory
@@ -34,6 +36,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -158,14 +161,17 @@ def run_watched(
     stop_above: int,
     timeout: float,
     ready: str | None = None,
+    until: Callable[[str], bool] | None = None,
     linger: float = 0.0,
 ) -> dict[str, Any]:
     """Run ``argv`` as a child process and watch its memory; its time and peaks.
 
     The child's resident memory (with its children's) is polled every
     :data:`POLL_SECONDS`; above ``stop_above`` bytes, after ``timeout`` seconds, or
-    ``linger`` seconds after a line of its output contains ``ready`` (a server's address),
-    it is stopped (SIGTERM, then SIGKILL). The peak reported is ``wait4``'s: the largest
+    ``linger`` seconds after it is ready, it is stopped (SIGTERM, then SIGKILL). Ready: a
+    line of its output contains ``ready`` (a server's address) and then ``until`` (given the
+    output so far, asked at every poll; None: at once) says so: a server has done what was
+    asked of it. The peak reported is ``wait4``'s: the largest
     resident set of the process and of the children it waited for, the kernel's own count,
     which polling cannot miss.
 
@@ -173,8 +179,9 @@ def run_watched(
     -------
     dict: ``seconds`` (wall, to the end or the stop), ``peak_bytes`` (wait4),
     ``returncode``, ``stopped`` (None, ``"memory"``, ``"timeout"`` or ``"ready"``),
-    ``ready_seconds`` (when ``ready`` was seen, else None), ``output`` (its last 3000
-    characters, stdout and stderr together)
+    ``ready_seconds`` (when ``ready`` was seen, else None), ``until_seconds`` (when
+    ``until`` said so, else None), ``output`` (its last 3000 characters, stdout and stderr
+    together)
     """
     start = time.perf_counter()
     child = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
@@ -192,15 +199,18 @@ def run_watched(
     reader = threading.Thread(target=read, args=(child.stdout,), daemon=True)
     reader.start()
     stopped: str | None = None
+    done: float | None = None
     while not _ended(child.pid):
         time.sleep(POLL_SECONDS)
         resident = _group_resident(child.pid)
         elapsed = time.perf_counter() - start
+        if seen_ready and done is None and (until is None or until("".join(lines))):
+            done = elapsed
         if resident > stop_above:
             stopped = "memory"
         elif elapsed > timeout:
             stopped = "timeout"
-        elif seen_ready and elapsed > seen_ready[0] + linger:
+        elif done is not None and elapsed > done + linger:
             stopped = "ready"
         if stopped is not None:
             _stop(child.pid)
@@ -217,6 +227,7 @@ def run_watched(
         "returncode": child.returncode,
         "stopped": stopped,
         "ready_seconds": seen_ready[0] if seen_ready else None,
+        "until_seconds": done,
         "output": "".join(lines)[-3000:],
     }
 
@@ -269,6 +280,31 @@ def _stop(pid: int) -> None:
         os.killpg(pid, signal.SIGKILL)
 
 
+class _LightViewReady:
+    """Whether ``rig view``'s light view (the page's GPU relighting) is ready, asked over HTTP.
+
+    Called with the server's output: it finds the address there and asks ``/api/light``;
+    true once the status is ``ready`` or ``failed``. ``seen`` keeps the last answer.
+    """
+
+    def __init__(self) -> None:
+        self.seen: dict[str, Any] | None = None
+
+    def __call__(self, output: str) -> bool:
+        import re
+        import urllib.request
+
+        found = re.search(r"http://[\w.:\[\]-]+/", output)
+        if found is None:
+            return False
+        try:
+            with urllib.request.urlopen(found.group(0) + "api/light", timeout=5) as answer:
+                self.seen = json.loads(answer.read())
+        except (OSError, ValueError):
+            return False  # not answering yet, or busy
+        return self.seen is not None and self.seen.get("status") in ("ready", "failed")
+
+
 def _import_stage(args: argparse.Namespace) -> int:
     """``--stage import``: :func:`processing.rti.import_rti` of ``--lp`` into ``--store``."""
     from processing.rti import import_rti
@@ -299,6 +335,7 @@ def measure_size(megapixels: float, args: argparse.Namespace, work: Path) -> dic
     lp = make_rti_capture(capture, megapixels, args.lights, workers=args.workers)
     made = time.perf_counter() - started
     watch = {"stop_above": args.stop_above, "timeout": args.timeout}
+    light_view = _LightViewReady()
     commands: dict[str, tuple[list[str], dict[str, Any]]] = {
         "import": ([sys.executable, "-m", "bench.scale_rti", "--stage", "import", "--lp", str(lp),
                     "--store", str(store)], watch),
@@ -309,7 +346,7 @@ def measure_size(megapixels: float, args: argparse.Namespace, work: Path) -> dic
         "export-web": ([*rig, "export-web", str(store), "-o", str(work / f"web-{name}"),
                         "--models", "ptm", "--quiet"], watch),
         "view": ([*rig, "view", str(store)],
-                 watch | {"ready": "http://", "linger": args.view_linger,
+                 watch | {"ready": "http://", "until": light_view, "linger": args.view_linger,
                           "timeout": min(args.timeout, args.view_wait)}),
     }  # fmt: skip
     stages: dict[str, dict[str, Any]] = {}
@@ -317,6 +354,8 @@ def measure_size(megapixels: float, args: argparse.Namespace, work: Path) -> dic
         argv, options = commands[stage]
         print(f"  {stage}: {' '.join(argv)}", file=sys.stderr, flush=True)
         result = run_watched(argv, **options)
+        if stage == "view":
+            result["light_view"] = light_view.seen
         result["seconds_per_megapixel"] = result["seconds"] / (pixels / 1e6)
         result["within_bound"] = result["peak_bytes"] <= args.bound
         stages[stage] = result
@@ -327,11 +366,14 @@ def measure_size(megapixels: float, args: argparse.Namespace, work: Path) -> dic
             break  # nothing to run the others on
     row = {
         "megapixels": pixels / 1e6,
+        "command": " ".join(["python -m bench.scale_rti", *sys.argv[1:]]),
         "width": width,
         "height": height,
         "lights": args.lights,
         "float32_bytes": pixels * args.lights * 3 * 4,
         "make_capture_seconds": made,
+        "fit_models": args.models,
+        "evaluate_methods": args.methods,
         "disk_bytes": {
             "capture": _size_of(capture),
             "store": _size_of(store),
@@ -359,9 +401,16 @@ def _table(results: list[dict[str, Any]], bound: int) -> str:
             note = stage["stopped"] or ("" if stage["returncode"] == 0 else
                                         f"failed ({stage['returncode']})")  # fmt: skip
             if stage["stopped"] == "ready":
-                note = f"address after {stage['ready_seconds']:.0f} s, then stopped"
+                status = (stage.get("light_view") or {}).get("status", "?")
+                note = (f"address after {stage['ready_seconds']:.0f} s, light view {status} "
+                        f"after {stage['until_seconds']:.0f} s")  # fmt: skip
             elif stage["stopped"] == "memory":
                 note = "stopped: memory above the stop line"
+            if name == "fit" and "fit_models" in row:
+                note = f"{note}; " * bool(note) + f"models {row['fit_models']}"
+            if name == "evaluate" and "evaluate_methods" in row:
+                count = len(row["evaluate_methods"].split(","))
+                note = f"{note}; " * bool(note) + f"{count} methods"
             lines.append(
                 f"| {size} | {format_size(row['float32_bytes'])} | {name} | "
                 f"{stage['seconds']:.0f} | {stage['seconds_per_megapixel']:.1f} | "
@@ -449,17 +498,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--view-wait",
         type=float,
-        default=900.0,
-        help="seconds rig view may take to print its address (default 900)",
+        default=3600.0,
+        help="seconds rig view may take to make its light view ready (default 3600)",
     )
     parser.add_argument(
         "--view-linger",
         type=float,
-        default=30.0,
-        help="seconds rig view runs on after its address (default 30)",
+        default=5.0,
+        help="seconds rig view runs on once its light view is ready (default 5)",
     )
     parser.add_argument("--workers", type=int, default=2, help="threads making a capture")
     parser.add_argument("--keep", action="store_true", help="keep the captures and stores")
+    parser.add_argument("--append", action="store_true",
+                        help="add the sizes to DIR/scale_rti.json rather than replace it "
+                        "(sizes run with other --models or --methods)")  # fmt: skip
     parser.add_argument(
         "--from-json",
         action="store_true",
@@ -482,15 +534,16 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     saved = out / "scale_rti.json"
     results: list[dict[str, Any]] = []
-    if args.from_json:
+    if args.from_json or args.append:
         results = json.loads(saved.read_text())["sizes"]
-    else:
+    if not args.from_json:
         work: Path = args.work or Path("/tmp/rig-scale-rti")
         work.mkdir(parents=True, exist_ok=True)
         for megapixels in (float(m) for m in args.megapixels.split(",")):
             results.append(measure_size(megapixels, args, work))
+            results.sort(key=lambda row: row["megapixels"])
             document = {"bound_bytes": args.bound, "stop_above_bytes": args.stop_above,
-                        "command": " ".join(sys.argv), "sizes": results}  # fmt: skip
+                        "sizes": results}  # fmt: skip
             saved.write_text(json.dumps(document, indent=2))
     _chart(results, out / "scale_rti.png", args.bound)
     print(_table(results, args.bound))

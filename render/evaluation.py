@@ -85,11 +85,13 @@ CHOICE_SAMPLES = 3000
 #: megapixels) is scored on :data:`TILE_SIDE` tiles spread evenly over it
 #: (:func:`pixel_sample`), so that every method's fit and predictions of every test image stay
 #: within memory (at 60 lights a 24-megapixel view is 17 GB of float32; its predictions under
-#: 30 test lights 8.6 GB more). 262,144 pixels x 30 test images is 7.9 million scored pixels.
-EVALUATE_PIXELS = 4 * 256 * 256
+#: 30 test lights 8.6 GB more). Measured with 60 lights (bench.scale_rti): the learned rung
+#: alone peaked at 3.7 GB on 262,144 pixels and 1.2 GB on 131,072, every method together at
+#: 5.3 GB on 262,144. 131,072 pixels x 30 test images is 3.9 million scored pixels.
+EVALUATE_PIXELS = 8 * 128 * 128
 #: Side (pixels) of the tiles a large view is scored on: square, so SSIM's 11 x 11 windows see
 #: the neighbourhoods the view has.
-TILE_SIDE = 256
+TILE_SIDE = 128
 
 
 @dataclass(frozen=True)
@@ -263,10 +265,11 @@ def pixel_sample(
 ) -> PixelSample | None:
     """The tiles a view of ``image_shape`` is scored on, or None when it is scored whole.
 
-    A view of more than ``max_pixels`` pixels is scored on ``max_pixels // side^2`` tiles
-    (at least one) of ``side`` x ``side`` pixels, in a grid of about the view's aspect whose
-    cells each hold one tile at their centre: evenly spread, the same for every method and
-    every test image, and reproducible (no random draw).
+    A view of more than ``max_pixels`` pixels is scored on up to ``max_pixels // side^2``
+    tiles (at least one) of ``side`` x ``side`` pixels, in the grid of the most such tiles
+    whose aspect is nearest the view's, each cell holding one tile at its centre: evenly
+    spread, the same for every method and every test image, and reproducible (no random
+    draw).
 
     Parameters
     ----------
@@ -281,8 +284,11 @@ def pixel_sample(
         return None
     height, width = image_shape
     count = max(1, max_pixels // (side * side))
-    columns = min(count, max(1, round(math.sqrt(count * width / height))))
-    rows = max(1, count // columns)
+    aspect = width / height
+    columns = max(
+        range(1, count + 1), key=lambda c: (count // c * c, -abs(math.log(c * c / count / aspect)))
+    )
+    rows = count // columns
     side = min(side, height // rows, width // columns)
     if side < SSIM_WINDOW:
         raise InputError(

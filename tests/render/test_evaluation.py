@@ -161,9 +161,13 @@ def test_a_large_view_is_sampled_by_tiles_spread_evenly() -> None:
     assert pixel_sample((43, 64)) is None  # the bundled capture is scored whole
     assert pixel_sample(None) is None
     sample = pixel_sample((4000, 6000))
-    assert sample is not None and sample.side == TILE_SIDE and sample.columns == 2
-    assert sample.origins == ((872, 1372), (872, 4372), (2872, 1372), (2872, 4372))
-    assert "4 tiles of 256 x 256" in sample.note() and "262,144 of its 24,000,000" in sample.note()
+    assert sample is not None and sample.side == TILE_SIDE == 128 and sample.columns == 4
+    # A 4 x 2 grid of 1500 x 2000 cells (the 3:2 view's aspect nearest), a tile at each centre.
+    assert sample.origins == tuple((r, c) for r in (936, 2936) for c in (686, 2186, 3686, 5186))
+    assert "8 tiles of 128 x 128 (a 4 x 2 grid" in sample.note()
+    assert "131,072 of its 24,000,000" in sample.note()
+    upright = pixel_sample((6000, 4000))
+    assert upright is not None and upright.columns == 2 and len(upright.origins) == 8
     small = pixel_sample((64, 96), max_pixels=1024, side=16)
     assert small is not None and small.pixels == 1024 and len(small.origins) == 4
     mask = small.mask(None)
