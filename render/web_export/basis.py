@@ -104,7 +104,7 @@ def _design(model: BasisModel, lights: NDArray[np.float64]) -> NDArray[np.float6
 
 def basis_planes(
     model: BasisModel,
-    levels: NDArray[np.float32],
+    levels: NDArray[np.uint8],
     lights: NDArray[np.float64],
     visible: NDArray[np.bool_],
 ) -> NDArray[np.float32]:

@@ -30,7 +30,6 @@ from core.image_io import write_exr, write_png16
 from processing.image_quality import display_scale
 from processing.neural_rti import NeuralSettings
 from processing.sample_models import photometric_stereo
-from render.light_prediction import eight_bit_levels
 from render.web_export import (
     ERROR_SAMPLES,
     NEURAL_SECONDS,
@@ -44,6 +43,7 @@ from render.web_export import (
     WebModel,
 )
 from render.web_export.basis import basis_planes, terms, write_basis
+from render.web_export.levels import eight_bit
 from render.web_export.neural import FREE_CODE_PIXELS, NEURAL_SAMPLES, Training, write_neural
 from render.web_export.planes import PlaneStore
 from render.web_export.result import Probe, WebExport, WebModelExport
@@ -148,7 +148,7 @@ def export_web(
         began = time.perf_counter()
         for start, values in _bands(field, camera, say):
             stop = start + values.shape[1]
-            levels = eight_bit_levels(values, white)  # what the RTI tools fit, encoded once
+            levels = eight_bit(values, white)  # what the RTI tools fit, encoded once
             for basis in bases:
                 planes = basis_planes(basis, levels, lights, visible[start:stop])
                 stores[basis].write(start, planes)
@@ -311,7 +311,7 @@ def _pick(pixels: NDArray[np.int64], count: int, rng: np.random.Generator) -> ND
 def _gather(
     into: NDArray[np.uint8],
     pixels: NDArray[np.int64],
-    levels: NDArray[np.float32],
+    levels: NDArray[np.uint8],
     start: int,
     stop: int,
 ) -> None:
@@ -350,7 +350,7 @@ def _level_bands(
 ) -> Iterator[tuple[int, NDArray[np.uint8]]]:
     """(first pixel, 8-bit values (T, n, 3)) of each band: the neural encoder's pass."""
     for start, values in _bands(field, camera):
-        yield start, eight_bit_levels(values, white).astype(np.uint8)
+        yield start, eight_bit(values, white)
 
 
 def _white_scale(field: ReflectanceField, camera: int, visible: NDArray[np.bool_]) -> float:
@@ -390,7 +390,10 @@ def _write_normals(
     n[~visible] = (0.0, 0.0, 1.0)
     image = n.reshape(*shape, 3)
     png, exr = folder / "normals.png", folder / "normals.exr"
-    encoded = np.clip(np.rint((image * 0.5 + 0.5) * 65535.0), 0, 65535).astype(np.uint16)
+    encoded = np.empty(image.shape, np.uint16)
+    for row in range(0, shape[0], 256):  # float temporaries of 256 rows, not of the image
+        rows = image[row : row + 256]
+        encoded[row : row + 256] = np.clip(np.rint((rows * 0.5 + 0.5) * 65535.0), 0, 65535)
     write_png16(png, encoded)
     del encoded
     write_exr(exr, image, alpha=visible.reshape(shape).astype(np.float32))

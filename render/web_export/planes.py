@@ -21,6 +21,8 @@ __all__ = ["MIN_SPAN", "PlaneStore", "quantise"]
 
 #: Smallest plane range written: a constant plane still has a finite bias.
 MIN_SPAN = 1e-6
+#: Values (rows of a plane image) quantised at once.
+QUANTISE_ROWS = 1 << 20
 
 
 class PlaneStore:
@@ -92,6 +94,13 @@ def quantise(
     """The nearest of 256 levels of each value: ``round((v - low) / span * 255)``, clipped.
 
     A viewer decodes ``byte / 255 * span + low``: each value errs by ``span / 510`` at most.
+    Computed :data:`QUANTISE_ROWS` rows at a time: the float64 temporaries of a whole plane
+    image of a 24-megapixel view would be gigabytes.
     """
-    scaled = (np.asarray(values, dtype=np.float64) - low) / span * 255.0
-    return np.clip(np.rint(scaled), 0, 255).astype(np.uint8)
+    v = np.asarray(values)
+    out = np.empty(v.shape, dtype=np.uint8)
+    for start in range(0, len(v), QUANTISE_ROWS):
+        part = slice(start, start + QUANTISE_ROWS)
+        scaled = (v[part].astype(np.float64) - low) / span * 255.0
+        out[part] = np.clip(np.rint(scaled), 0, 255)
+    return out

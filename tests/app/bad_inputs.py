@@ -1252,6 +1252,21 @@ def _cases() -> list[Case]:
         Case("export-web: --models rbf", (*export, "--models", "rbf"), ("rbf",)),
         Case("export-web: --quality 0", (*export, "--quality", "0"), ("quality",)),
         Case(
+            "export-web: --format png --no-tiles",
+            (*export, "--format", "png", "--no-tiles"),
+            ("--format png --no-tiles", "plane_N.jpg"),
+        ),
+        Case(
+            "export-web: --tile-size 64",
+            (*export, "--tiles", "--tile-size", "64"),
+            ("tile size 64", "64 pixels", "62"),
+        ),
+        Case(
+            "export-web: --neural-holdout 0.5",
+            (*export, "--neural-holdout", "0.5"),
+            ("--neural-holdout", "0.5"),
+        ),
+        Case(
             "export-web: -o a file",
             ("export-web", "{rti}", "-o", F + "existing.txt"),
             ("existing.txt",),

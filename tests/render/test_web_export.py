@@ -440,3 +440,27 @@ def test_openlime_display_blacks_out_the_shadows(lion: ReflectanceField) -> None
     psnr = 10 * math.log10(255**2 / error)
     assert 0.21 < blacked < 0.23  # measured 0.218
     assert 38.8 < psnr < 39.3  # measured 39.0 dB
+
+
+def test_the_level_table_is_eight_bit_levels(lion: ReflectanceField) -> None:
+    from render.web_export.levels import _table, eight_bit
+
+    # Every level boundary and its neighbours, every 7th float32 below 0.01 (where the
+    # sRGB curve is steepest), random values in and out of 0..1, -0.0, and a capture.
+    _, edges = _table()
+    boundaries = edges[np.isfinite(edges)].view(np.uint32).astype(np.int64)
+    assert len(boundaries) == 255
+    near = (boundaries[:, None] + np.arange(-50, 50)).reshape(-1).astype(np.uint32)
+    low = np.arange(0, np.float32(0.01).view(np.uint32), 7, dtype=np.uint32)
+    rng = np.random.default_rng(8)
+    tests = [
+        near.view(np.float32),
+        low.view(np.float32),
+        rng.uniform(-0.2, 1.3, 2_000_000).astype(np.float32),
+        np.array([-0.0, 0.0, 1.0, np.float32(1.0) + np.float32(1e-7), 5.0], np.float32),
+        lion.camera_radiance(0),
+    ]
+    for values in tests:
+        np.testing.assert_array_equal(eight_bit(values), eight_bit_levels(values))
+    scaled = rng.uniform(0.0, 3.0, 100_000).astype(np.float32)
+    np.testing.assert_array_equal(eight_bit(scaled, 0.37), eight_bit_levels(scaled, 0.37))
