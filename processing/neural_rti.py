@@ -459,7 +459,7 @@ def _train(
     Returns (the last step's loss, steps taken, seconds).
 
     ``coder``: an encoder (reads a pixel's row of values), or a tensor (N, 9) of codes, one
-    per pixel (free codes when it is among ``parameters``). ``values``: (N, T', 3) uint8 at
+    per pixel (free codes when they are among ``groups``). ``values``: (N, T', 3) uint8 at
     the T' ``lights`` trained on.
     """
     import torch

@@ -13,6 +13,7 @@ from processing.neural_rti import (
     HIDDEN,
     NeuralRTI,
     NeuralSettings,
+    fit_codes,
     fit_neural_rti,
     tune_decoder,
 )
@@ -128,6 +129,26 @@ def test_tuning_fits_the_decoder_to_moved_codes() -> None:
     assert before > 2 * fitted  # measured 302 against 95 (squared 8-bit levels)
     assert after < 1.2 * fitted  # measured 94
     assert tuned.codes is model.codes and tuned.steps == model.steps + 400
+
+
+def test_codes_are_fitted_to_new_pixels_with_the_decoder_fixed() -> None:
+    lights = _lights()
+    levels = _lambertian(lights, 400)
+    model = fit_neural_rti(levels[:, :300], lights, STEPS)
+    weights = [w.copy() for w, _ in model.decoder]
+    other = levels[:, 300:]
+    settings = dataclasses.replace(STEPS, steps=400, batch=100, lights_per_step=None)
+    codes = fit_codes(model, other, settings)  # from the mean of the fitted codes
+
+    def psnr(c: np.ndarray) -> float:
+        shown = np.clip(np.rint(model.decode(c, lights) * 255), 0, 255)
+        return 10 * math.log10(255**2 / np.mean((shown - other) ** 2))
+
+    assert model.codes is not None
+    assert psnr(np.tile(model.codes.mean(0), (100, 1))) < 15.0  # measured 12.5 dB
+    assert psnr(codes) > 25.0  # measured 29.2 dB
+    for before, (after, _) in zip(weights, model.decoder, strict=True):
+        np.testing.assert_array_equal(before, after)
 
 
 def test_bad_inputs_are_named() -> None:
