@@ -23,14 +23,14 @@ function waitForFrame() {
   if (state.waiting) return;
   state.waiting = setInterval(() => {
     const seconds = (performance.now() - state.sentAt) / 1000;
-    if (seconds > 0.5) $("status").textContent = `rendering… (${seconds.toFixed(0)} s)`;
+    if (seconds > 0.5) setStatus(`rendering… (${seconds.toFixed(0)} s)`);
   }, 250);
 }
 
 function frameArrived() {
   clearInterval(state.waiting);
   state.waiting = null;
-  $("status").textContent = "live";
+  setStatus("live");
 }
 
 function wrapDegrees(value) {
@@ -60,10 +60,19 @@ function fillSelect(select, names, keepFirst) {
   }
 }
 
+// The header keeps one line (the pages' controls below must not move under the pointer when a
+// message grows); what does not fit is cut and the whole text is the tooltip.
+function setStatus(text) {
+  $("status").textContent = text;
+  $("status").title = text;
+}
+
 function showField(info) {
-  $("field").textContent = info.kind === "pixels"
+  const text = info.kind === "pixels"
     ? `${info.field} (${info.image_shape[1]} × ${info.image_shape[0]} pixels, ${info.shape[1]} lights)`
     : `${info.field} (${info.kind}, ${info.shape.join(" × ")})`;
+  $("field").textContent = text;
+  $("field").title = text;
 }
 
 function applyState(info) {
@@ -146,7 +155,7 @@ function onMessage(event) {
   } else if (message.type === "error") {
     clearInterval(state.waiting);
     state.waiting = null;
-    $("status").textContent = `error: ${message.message}`;
+    setStatus(`error: ${message.message}`);
   }
 }
 
@@ -168,17 +177,17 @@ function connect() {
   socket.binaryType = "arraybuffer";
   socket.onopen = () => send({});
   socket.onmessage = onMessage;
-  socket.onclose = () => { $("status").textContent = "disconnected: is rig view still running?"; };
+  socket.onclose = () => { setStatus("disconnected: is rig view still running?"); };
 }
 
 async function upload(kind, file) {
-  $("status").textContent = `loading ${file.name}…`;
+  setStatus(`loading ${file.name}…`);
   const response = await fetch(`api/${kind}?name=${encodeURIComponent(file.name)}`, {
     method: "POST", body: file,
   });
   const body = await response.json();
   if (!response.ok) {
-    $("status").textContent = `error: ${body.error}`;
+    setStatus(`error: ${body.error}`);
     return;
   }
   applyState(body);
@@ -329,14 +338,14 @@ async function start() {
       lightView.start();
     }
     if (info.status === "failed") {
-      $("status").textContent = `the viewer could not start: ${info.error}`;
+      setStatus(`the viewer could not start: ${info.error}`);
       return;
     }
-    $("status").textContent = `server: ${info.status}… (${info.elapsed_s} s)`;
+    setStatus(`server: ${info.status}… (${info.elapsed_s} s)`);
     $("open-session").hidden = !info.on_request;
     await new Promise((r) => setTimeout(r, 400));
   }
-  $("status").textContent = "connecting…";
+  setStatus("connecting…");
   connect();
 }
 

@@ -10,13 +10,27 @@ display does to the colours is :mod:`render.web_export.display`; the whole expor
 :func:`render.web_export.export.export_web`. The format facts are pinned to the tools'
 sources, named in each module, and stated in ``docs/web-export.md``.
 
-This module holds only names and numbers (the command line's parser reads them without
-importing numpy); the functions and result types load on first use.
+The names and numbers are :mod:`render.web_export.names` (read without importing numpy); the
+functions and result types load on first use.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Literal, get_args
+from typing import TYPE_CHECKING, Any
+
+from render.web_export.names import (
+    BASIS_MODELS,
+    ERROR_SAMPLES,
+    NEURAL_SECONDS,
+    PLANE_FORMATS,
+    TILE_OVERLAP,
+    TILE_SIZE,
+    TILE_THRESHOLD,
+    WEB_MODELS,
+    BasisModel,
+    PlaneFormat,
+    WebModel,
+)
 
 if TYPE_CHECKING:
     from render.web_export.basis import VIEWER_TERMS, viewer_coefficients
@@ -46,28 +60,6 @@ __all__ = [
     "openlime_display",
     "viewer_coefficients",
 ]
-
-#: The linear bases written (Relight's ``ptm`` and ``hsh`` types).
-BasisModel = Literal["ptm", "hsh2", "hsh3"]
-BASIS_MODELS: tuple[BasisModel, ...] = get_args(BasisModel)
-#: Every model ``rig export-web --models`` writes: the bases and OpenLIME's ``neural``.
-WebModel = Literal["ptm", "hsh2", "hsh3", "neural"]
-WEB_MODELS: tuple[WebModel, ...] = get_args(WebModel)
-#: The planes' image format.
-PlaneFormat = Literal["jpg", "png"]
-PLANE_FORMATS: tuple[PlaneFormat, ...] = get_args(PlaneFormat)
-
-#: Images with a side longer than this (pixels) are tiled unless told otherwise.
-TILE_THRESHOLD = 2048
-#: Deep-zoom tile side (pixels) of images longer than it; with the overlap an inner tile is
-#: 256 pixels wide. Shorter images get a smaller side (:func:`automatic_tile_size`).
-TILE_SIZE = 254
-#: Pixels each tile repeats of its neighbours (hides the seams of bilinear filtering).
-TILE_OVERLAP = 1
-#: Visible pixels (at most) the reported errors are measured on.
-ERROR_SAMPLES = 4096
-#: Default time budget (s) of the neural model's fit (the decoder's tuning included).
-NEURAL_SECONDS = 120.0
 
 # What loads on first use, and from where (PEP 562).
 _LAZY = {

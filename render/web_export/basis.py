@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from core.atomic import write_json_atomic
 from processing.sample_models import evaluate_basis
-from render.web_export import BasisModel
+from render.web_export.names import BasisModel
 from render.web_export.planes import PlaneStore, quantise
 from render.web_export.result import Probe, WebModelExport, psnr_levels
 from render.web_export.tiles import Layout, stored, write_plane

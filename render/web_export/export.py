@@ -30,7 +30,9 @@ from core.image_io import write_exr, write_png16
 from processing.image_quality import display_scale
 from processing.neural_rti import NeuralSettings
 from processing.sample_models import photometric_stereo
-from render.web_export import (
+from render.web_export.basis import basis_planes, terms, write_basis
+from render.web_export.levels import eight_bit
+from render.web_export.names import (
     ERROR_SAMPLES,
     NEURAL_SECONDS,
     PLANE_FORMATS,
@@ -42,8 +44,6 @@ from render.web_export import (
     PlaneFormat,
     WebModel,
 )
-from render.web_export.basis import basis_planes, terms, write_basis
-from render.web_export.levels import eight_bit
 from render.web_export.neural import FREE_CODE_PIXELS, NEURAL_SAMPLES, Training, write_neural
 from render.web_export.planes import PlaneStore
 from render.web_export.result import Probe, WebExport, WebModelExport

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from processing.neural_rti import NeuralRTI
-from render.web_export import WebModel
+from render.web_export.names import WebModel
 
 __all__ = ["Probe", "WebExport", "WebModelExport", "psnr_levels"]
 

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from core.atomic import atomic_path
 from core.errors import InputError
 from core.image_io import read_pixels, write_uint8
-from render.web_export import TILE_SIZE, PlaneFormat
+from render.web_export.names import TILE_SIZE, PlaneFormat
 
 __all__ = ["Layout", "automatic_tile_size", "deepzoom_levels", "stored", "write_plane"]
 

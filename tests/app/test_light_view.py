@@ -123,10 +123,15 @@ def test_dragging_the_light_pad_moves_the_highlight(browser: Any, tmp_path: Path
     try:
         page, errors = _open_page(browser, server.url)
         FOLDER.mkdir(parents=True, exist_ok=True)
-        pad = page.locator("#light-pad").bounding_box()
-        centre_y = pad["y"] + pad["height"] / 2
+        # The pad stays where it was when the panorama session opens and the status changes.
+        before = page.locator("#light-pad").bounding_box()
+        page.wait_for_function("() => !document.body.classList.contains('preparing')",
+                               timeout=300_000)  # fmt: skip
+        assert page.locator("#light-pad").bounding_box() == before
         pictures = []
         for name, fraction in (("left", 0.2), ("right", 0.8)):
+            pad = page.locator("#light-pad").bounding_box()
+            centre_y = pad["y"] + pad["height"] / 2
             # A drag across the pad, ending where the light should be.
             page.mouse.move(pad["x"] + pad["width"] / 2, centre_y)
             page.mouse.down()
