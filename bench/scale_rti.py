@@ -16,7 +16,7 @@ capture's do), then runs each stage as its own process, the way a user runs it:
   ``--view-wait``.
 
 For each it records the wall time, seconds per megapixel and the stage's peak resident memory
-(``wait4``: the process and the children it waited for). A stage whose resident memory
+(each process's own peak, ``VmHWM``: see :func:`run_watched`). A stage whose resident memory
 passes ``--stop-above`` (default 8 GiB, twice the bound the issue sets) is stopped and
 recorded as such, so a stage that does not stream cannot take the machine down. Writes
 ``scale_rti.json`` and ``scale_rti.png`` and prints the table. Not a test: nothing is asserted
@@ -171,13 +171,19 @@ def run_watched(
     ``linger`` seconds after it is ready, it is stopped (SIGTERM, then SIGKILL). Ready: a
     line of its output contains ``ready`` (a server's address) and then ``until`` (given the
     output so far, asked at every poll; None: at once) says so: a server has done what was
-    asked of it. The peak reported is ``wait4``'s: the largest
-    resident set of the process and of the children it waited for, the kernel's own count,
-    which polling cannot miss.
+    asked of it.
+
+    The peak reported is each process's own peak resident set (``VmHWM`` in ``/proc``, which
+    the kernel keeps: polling misses only what grows in the last interval before a process
+    ends), summed over the stage's processes (exact for one process; for several, as if they
+    peaked at once). ``wait4``'s count is kept beside it but measures nothing here: at
+    ``exec`` Linux folds the peak of the memory the child was forked from (this process's)
+    into the child's.
 
     Returns
     -------
-    dict: ``seconds`` (wall, to the end or the stop), ``peak_bytes`` (wait4),
+    dict: ``seconds`` (wall, to the end or the stop), ``peak_bytes`` (VmHWM),
+    ``wait4_peak_bytes``,
     ``returncode``, ``stopped`` (None, ``"memory"``, ``"timeout"`` or ``"ready"``),
     ``ready_seconds`` (when ``ready`` was seen, else None), ``until_seconds`` (when
     ``until`` said so, else None), ``output`` (its last 3000 characters, stdout and stderr
@@ -233,7 +239,7 @@ def run_watched(
 
 
 #: Seconds between two readings of a watched stage's memory.
-POLL_SECONDS = 0.5
+POLL_SECONDS = 0.25
 
 
 def _ended(pid: int) -> bool:
@@ -305,6 +311,12 @@ class _LightViewReady:
         return self.seen is not None and self.seen.get("status") in ("ready", "failed")
 
 
+def _capture_stage(args: argparse.Namespace) -> int:
+    """``--stage capture``: :func:`make_rti_capture` into ``--folder``."""
+    make_rti_capture(args.folder, float(args.megapixels), args.lights, workers=args.workers)
+    return 0
+
+
 def _import_stage(args: argparse.Namespace) -> int:
     """``--stage import``: :func:`processing.rti.import_rti` of ``--lp`` into ``--store``."""
     from processing.rti import import_rti
@@ -327,13 +339,23 @@ def measure_size(megapixels: float, args: argparse.Namespace, work: Path) -> dic
     pixels = width * height
     name = f"{width}x{height}"
     capture, store = work / f"capture-{name}", work / f"{name}.zarr"
-    for stale in (capture, store, work / f"web-{name}"):
+    for stale in (store, work / f"web-{name}"):
         shutil.rmtree(stale, ignore_errors=True)
-    print(f"{name} ({pixels / 1e6:.1f} MP, {args.lights} lights): making the capture",
+    lp = capture / "dirs.lp"
+    made: dict[str, Any] | None = None
+    reused = args.reuse and lp.is_file()
+    print(f"{name} ({pixels / 1e6:.1f} MP, {args.lights} lights): "
+          f"{'the capture made before' if reused else 'making the capture'}",
           file=sys.stderr, flush=True)  # fmt: skip
-    started = time.perf_counter()
-    lp = make_rti_capture(capture, megapixels, args.lights, workers=args.workers)
-    made = time.perf_counter() - started
+    if not reused:
+        shutil.rmtree(capture, ignore_errors=True)
+        # In a process of its own: this one stays small (see run_watched on wait4).
+        made = run_watched([sys.executable, "-m", "bench.scale_rti", "--stage", "capture",
+                            "--folder", str(capture), "--megapixels", str(megapixels),
+                            "--lights", str(args.lights), "--workers", str(args.workers)],
+                           stop_above=args.stop_above, timeout=args.timeout)  # fmt: skip
+        if made["returncode"] != 0:
+            raise RuntimeError(f"making the capture failed:\n{made['output']}")
     watch = {"stop_above": args.stop_above, "timeout": args.timeout}
     light_view = _LightViewReady()
     commands: dict[str, tuple[list[str], dict[str, Any]]] = {
@@ -371,7 +393,7 @@ def measure_size(megapixels: float, args: argparse.Namespace, work: Path) -> dic
         "height": height,
         "lights": args.lights,
         "float32_bytes": pixels * args.lights * 3 * 4,
-        "make_capture_seconds": made,
+        "make_capture_seconds": None if made is None else made["seconds"],
         "fit_models": args.models,
         "evaluate_methods": args.methods,
         "disk_bytes": {
@@ -383,7 +405,7 @@ def measure_size(megapixels: float, args: argparse.Namespace, work: Path) -> dic
         "stages": stages,
     }
     if not args.keep:
-        for path in (capture, store, work / f"web-{name}"):
+        for path in (*(() if args.reuse else (capture,)), store, work / f"web-{name}"):
             shutil.rmtree(path, ignore_errors=True)
         store.with_name(store.name + ".models.npz").unlink(missing_ok=True)
     return row
@@ -517,12 +539,19 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="redraw the chart and the table from DIR/scale_rti.json",
     )
-    parser.add_argument("--stage", choices=("import",), help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--reuse", action="store_true",
+        help="use a capture already in --work (made by an earlier run) instead of a new one",
+    )  # fmt: skip
+    parser.add_argument("--stage", choices=("import", "capture"), help=argparse.SUPPRESS)
+    parser.add_argument("--folder", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--lp", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--store", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)  # fmt: skip
     if args.stage == "import":
         return _import_stage(args)
+    if args.stage == "capture":
+        return _capture_stage(args)
     if args.output is None:
         parser.error("-o DIR is required")
     args.bound, args.stop_above = parse_size(args.bound), parse_size(args.stop_above)
