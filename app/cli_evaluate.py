@@ -148,7 +148,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 
 def _lp_names(path: Path) -> list[str]:
-    from processing.rti_lp import read_lp
+    from core.lp_format import read_lp
 
     return list(read_lp(path).files)
 
@@ -165,8 +165,8 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
 
     from core.camera_model import camera_to_rig
     from core.image_io import write_exr, write_srgb8
+    from core.lp_format import read_lp
     from processing.image_quality import display_8bit, display_scale
-    from processing.rti_lp import read_lp
     from render.light_prediction import make_predictor
     from render.rung_choice import choose_light_rung
 

@@ -114,8 +114,8 @@ def make_rti_capture(
 
     from core.colour import linear_to_srgb
     from core.image_io import linear_from_pixels, read_pixels, write_srgb8
+    from core.lp_format import read_lp, write_lp
     from core.sample_data import rti_capture_path
-    from processing.rti_lp import read_lp, write_lp
 
     source = read_lp(rti_capture_path())
     if not 3 <= lights <= len(source):

@@ -1,10 +1,11 @@
 """RTI ``.lp`` export of a dataset: one light-position file per camera pose.
 
-An ``.lp`` file is ``N`` on the first line, then ``filename x y z`` per image, the direction from
-the object toward the light in the CAMERA frame: x to the image's right, y to the image's top, z
-toward the camera (the frame of ``processing.rti``, which reads these files back). The camera frame
-is :meth:`core.camera_model.PinholeCamera.axes` of the image's camera pose. A turntable angle turns
-the object, not the camera-light pair, so it does not change these directions and is ignored.
+The format is :mod:`core.lp_format`'s (written by its :func:`~core.lp_format.write_lp`, read back
+by :func:`~core.lp_format.read_lp`): ``N`` on the first line, then ``filename x y z`` per image,
+the direction from the object toward the light in the CAMERA frame of the image's camera pose
+(:func:`core.camera_model.rig_to_camera`: x to the image's right, y to the image's top, z toward
+the camera). A turntable angle turns the object, not the camera-light pair, so it does not change
+these directions and is ignored.
 """
 
 from __future__ import annotations
@@ -19,12 +20,12 @@ from numpy.typing import NDArray
 
 from capture.dataset import Dataset
 from capture.manifest import ImageRecord
-from core.atomic import atomic_path
-from core.camera_model import PinholeCamera
+from core.camera_model import PinholeCamera, rig_to_camera
 from core.directions import direction_from_angles_deg
 from core.errors import DatasetError, InputError
+from core.lp_format import write_lp
 
-__all__ = ["export_lp", "light_in_camera_frame"]
+__all__ = ["export_lp"]
 
 _POSE_KEYS = (
     "camera_azimuth_deg",
@@ -34,38 +35,18 @@ _POSE_KEYS = (
 )
 
 
-def light_in_camera_frame(
-    camera_azimuth_deg: float,
-    camera_inclination_deg: float,
-    light_azimuth_deg: float,
-    light_inclination_deg: float,
-) -> NDArray[np.float64]:
-    """The unit direction toward a light in a camera's frame (x right, y up, z toward camera).
-
-    Parameters
-    ----------
-    camera_azimuth_deg, camera_inclination_deg : float, direction from the object to the camera
-    light_azimuth_deg, light_inclination_deg : float, direction from the object to the light
-
-    Returns
-    -------
-    ndarray, shape (3,), float64
-    """
-    camera = PinholeCamera(azimuth_deg=camera_azimuth_deg, inclination_deg=camera_inclination_deg)
-    right, up, forward = camera.axes()
-    # The camera looks along forward, so "toward the camera" is -forward.
-    frame = np.stack([right, up, -forward])
-    return frame @ direction_from_angles_deg(light_azimuth_deg, light_inclination_deg)
-
-
 def _direction(dataset: Dataset, record: ImageRecord, pose: str) -> NDArray[np.float64]:
     angles = record.measured_pose if pose == "measured" else record.commanded_pose
     where = f"{dataset.manifest_path}, {record.key} ({record.file})"
     missing = [key for key in _POSE_KEYS if key not in angles]
     if missing:
         raise DatasetError(f"{where}: the {pose} pose has no {', '.join(missing)}")
+    camera_azimuth, camera_inclination, light_azimuth, light_inclination = (
+        angles[key] for key in _POSE_KEYS
+    )
     try:
-        return light_in_camera_frame(*(angles[key] for key in _POSE_KEYS))
+        camera = PinholeCamera(azimuth_deg=camera_azimuth, inclination_deg=camera_inclination)
+        return rig_to_camera(direction_from_angles_deg(light_azimuth, light_inclination), camera)
     except InputError as error:
         raise DatasetError(f"{where}: {error}") from None
 
@@ -95,7 +76,8 @@ def export_lp(
     Raises
     ------
     InputError
-        An unknown ``pose``, or a dataset without light images.
+        An unknown ``pose``, a dataset without light images, or an image path an ``.lp`` file
+        cannot hold (:func:`core.lp_format.write_lp`).
     DatasetError
         A record whose pose lacks a camera or light angle, or is out of range.
     """
@@ -113,13 +95,14 @@ def export_lp(
     for (camera, exposure), records in sorted(groups.items()):
         records.sort(key=lambda record: record.key.order())
         name = f"camera_{camera:03d}" + (f"_exposure_{exposure:02d}" if bracketed else "")
-        lines = [f"{len(records)}"]
-        for record in records:
-            x, y, z = _direction(dataset, record, pose)
-            image = Path(os.path.relpath(dataset.image_path(record).absolute(), folder.absolute()))
-            lines.append(f"{image.as_posix()} {float(x)!r} {float(y)!r} {float(z)!r}")
+        directions = np.stack([_direction(dataset, record, pose) for record in records])
+        images = [
+            Path(
+                os.path.relpath(dataset.image_path(record).absolute(), folder.absolute())
+            ).as_posix()
+            for record in records
+        ]
         target = folder / f"{name}.lp"
-        with atomic_path(target) as temporary:
-            temporary.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        write_lp(target, images, directions)
         written.append(target)
     return written

@@ -1,13 +1,13 @@
 """Reflectance Transformation Imaging (RTI) captures as single-view fields.
 
 An RTI capture is one fixed camera and T photographs listed in an ``.lp`` file
-(:mod:`processing.rti_lp`: the format, a fifth column of light intensities, their sidecar).
+(:mod:`core.lp_format`: the format, a fifth column of light intensities, their sidecar).
 
 Beside the ``.lp`` file (:func:`import_rti` looks for them; the first name found is used):
 
 - a mask, ``<lp stem>.mask.png`` or else ``mask.png``: non-zero pixels are the object, the
   others are not samples (an explicit ``mask`` argument wins over both);
-- light intensities (:data:`processing.rti_lp.INTENSITY_SIDECARS`); a fifth column and a
+- light intensities (:data:`core.lp_format.INTENSITY_SIDECARS`); a fifth column and a
   sidecar together are refused.
 
 Imported, an RTI capture becomes a field of pixels (``core.field_store``, samples of kind
@@ -51,14 +51,14 @@ from core.image_io import (
     write_linear16_tiff,
     write_srgb8,
 )
-from core.progress import progress_bar
-from processing.rti_lp import (
+from core.lp_format import (
     INTENSITY_SIDECARS,
     LightPositions,
     read_intensity_sidecar,
     read_lp,
     write_lp,
 )
+from core.progress import progress_bar
 
 __all__ = [
     "MASK_SIDECARS",

@@ -10,8 +10,8 @@ import pytest
 
 from app.cli import main
 from core.image_io import read_pixels
+from core.lp_format import read_lp
 from core.sample_data import rti_capture_path
-from processing.rti_lp import read_lp
 
 RTI = rti_capture_path().parent
 

@@ -12,9 +12,9 @@ from bench.scale_rti import capture_size, make_rti_capture, run_watched
 from core.colour import srgb_to_linear
 from core.errors import InputError
 from core.image_io import read_pixels
+from core.lp_format import read_lp
 from core.sample_data import rti_capture_path
 from processing.rti import import_rti
-from processing.rti_lp import read_lp
 
 
 def test_sizes_are_three_by_two_in_jpeg_blocks() -> None:

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from capture.dataset import Dataset, ImageKey
-from capture.lp_export import export_lp, light_in_camera_frame
+from capture.lp_export import export_lp
 from core.camera_model import PinholeCamera, rig_to_camera
 from core.directions import direction_from_angles_deg
 from core.errors import DatasetError, InputError
-from processing.rti_lp import read_lp
+from core.lp_format import read_lp
 
 CAMERAS = [(0.0, 0.0), (30.0, 60.0), (250.0, 90.0)]  # (azimuth, inclination) degrees
 LIGHTS = [(0.0, 10.0), (45.0, 40.0), (170.0, 75.0), (300.0, 89.0), (90.0, 0.0)]
@@ -94,28 +94,6 @@ def test_commanded_pose_and_exposure_brackets(tmp_path: Path) -> None:
     camera = PinholeCamera(*CAMERAS[1])
     expected = rig_to_camera(direction_from_angles_deg(*np.transpose(LIGHTS)), camera)
     np.testing.assert_allclose(read.directions, expected, atol=1e-12)
-
-
-@pytest.mark.parametrize(
-    ("camera", "light", "expected"),
-    [
-        # Camera on +x looking at the object: image right is +y, image up is +z.
-        ((0.0, 90.0), (90.0, 90.0), (1.0, 0.0, 0.0)),
-        ((0.0, 90.0), (0.0, 0.0), (0.0, 1.0, 0.0)),
-        ((0.0, 90.0), (0.0, 90.0), (0.0, 0.0, 1.0)),
-        ((0.0, 90.0), (180.0, 90.0), (0.0, 0.0, -1.0)),
-        # Camera straight above (the RTI set-up): image right is +y, image up is -x.
-        ((0.0, 0.0), (90.0, 90.0), (1.0, 0.0, 0.0)),
-        ((0.0, 0.0), (180.0, 90.0), (0.0, 1.0, 0.0)),
-        ((0.0, 0.0), (0.0, 0.0), (0.0, 0.0, 1.0)),
-        # A light where the camera is points at the camera, whatever the pose.
-        ((137.0, 61.0), (137.0, 61.0), (0.0, 0.0, 1.0)),
-    ],
-)
-def test_known_directions(
-    camera: tuple[float, float], light: tuple[float, float], expected: tuple[float, ...]
-) -> None:
-    np.testing.assert_allclose(light_in_camera_frame(*camera, *light), expected, atol=1e-12)
 
 
 def test_bad_poses_and_empty_datasets(tmp_path: Path) -> None:

@@ -3,7 +3,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.camera_model import PinholeCamera
+from core.camera_model import PinholeCamera, rig_to_camera
+from core.directions import direction_from_angles_deg
 from core.errors import InputError
 
 
@@ -47,3 +48,27 @@ def test_focal_length_matches_the_field_of_view() -> None:
 def test_bad_cameras(kwargs: dict[str, float], message: str) -> None:
     with pytest.raises(InputError, match=message):
         PinholeCamera(0.0, 45.0, **kwargs)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("camera", "light", "expected"),
+    [
+        # Camera on +x looking at the object: image right is +y, image up is +z.
+        ((0.0, 90.0), (90.0, 90.0), (1.0, 0.0, 0.0)),
+        ((0.0, 90.0), (0.0, 0.0), (0.0, 1.0, 0.0)),
+        ((0.0, 90.0), (0.0, 90.0), (0.0, 0.0, 1.0)),
+        ((0.0, 90.0), (180.0, 90.0), (0.0, 0.0, -1.0)),
+        # Camera straight above (the RTI set-up): image right is +y, image up is -x.
+        ((0.0, 0.0), (90.0, 90.0), (1.0, 0.0, 0.0)),
+        ((0.0, 0.0), (180.0, 90.0), (0.0, 1.0, 0.0)),
+        ((0.0, 0.0), (0.0, 0.0), (0.0, 0.0, 1.0)),
+        # A light where the camera is points at the camera, whatever the pose.
+        ((137.0, 61.0), (137.0, 61.0), (0.0, 0.0, 1.0)),
+    ],
+)
+def test_known_directions_of_lights_in_the_camera_frame(
+    camera: tuple[float, float], light: tuple[float, float], expected: tuple[float, ...]
+) -> None:
+    # The camera frame of a light (the frame of .lp files), as capture.lp_export uses it.
+    towards = direction_from_angles_deg(*light)
+    np.testing.assert_allclose(rig_to_camera(towards, PinholeCamera(*camera)), expected, atol=1e-12)

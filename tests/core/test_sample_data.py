@@ -11,9 +11,9 @@ from core.colour import luminance
 from core.directions import panorama_solid_angles
 from core.errors import InputError
 from core.image_io import read_pixels
+from core.lp_format import read_lp
 from core.sample_data import PANORAMA_NAMES, PanoramaName, panorama_path, rti_capture_path
 from processing.panorama import read_panorama
-from processing.rti_lp import read_lp
 
 
 def test_the_bundled_panoramas_are_named() -> None:

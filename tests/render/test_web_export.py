@@ -33,9 +33,9 @@ from core.colour import linear_to_srgb
 from core.directions import hemisphere_layout
 from core.errors import InputError
 from core.field_store import FieldStoreWriter, ReflectanceField
+from core.lp_format import read_lp
 from core.sample_data import rti_capture_path
 from processing.rti import import_rti
-from processing.rti_lp import read_lp
 from processing.sample_models import evaluate_basis
 from render.light_prediction import bound_factor, eight_bit_levels, make_predictor
 from render.web_export import automatic_tile_size, openlime_display

@@ -1,5 +1,9 @@
 """The RTI ``.lp`` light-position format: reading, writing and the intensity sidecar.
 
+The one home of the format: :mod:`capture.lp_export` writes a dataset's light poses with
+:func:`write_lp`, :mod:`processing.rti` imports captures with :func:`read_lp` (and writes a
+field's lights back); both sit above ``core``.
+
 An RTI capture is one fixed camera and T photographs, each lit from one direction, listed in an
 ``.lp`` file::
 
@@ -10,10 +14,11 @@ An RTI capture is one fixed camera and T photographs, each lit from one directio
 The first line is the image count N, then N lines ``filename x y z`` (whitespace-separated; the
 filename is relative to the ``.lp`` file's folder and may name a subfolder). The directions point
 from the object toward the light in the CAMERA frame: x to the image's right, y to the image's
-top, z toward the camera. Files in the wild carry Windows or old-Mac line endings, tabs, blank
-lines and float32-rounded vectors; all are accepted (every direction is normalised). A count that
-disagrees with the entries, a missing or non-numeric value, a zero or non-finite vector is refused
-with the file and line number.
+top, z toward the camera (:func:`core.camera_model.rig_to_camera` turns rig-frame directions
+into it, :func:`core.camera_model.camera_to_rig` back). Files in the wild carry Windows or
+old-Mac line endings, tabs, blank lines and float32-rounded vectors; all are accepted (every
+direction is normalised). A count that disagrees with the entries, a missing or non-numeric
+value, a zero or non-finite vector is refused with the file and line number.
 
 This project also reads (and :func:`write_lp` writes) a fifth column, ``filename x y z
 intensity``: the light's relative intensity (positive, finite), by which the import divides the
