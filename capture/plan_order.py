@@ -1,12 +1,8 @@
-"""Ordering a sweep plan's poses: motion-time model, tours, and the safe schedule.
+"""Ordering a sweep plan's poses: tours by motion time, and the safe schedule.
 
-The motion model mirrors :mod:`rig.hardware`: every axis moves at once, so a move takes the
-longest of its parts. Each Dynamixel axis runs its own trapezoid (``velocity_deg_s``,
-``acceleration_deg_s2``); the GRBL axes run one straight move at the smallest ``feed_deg_min``
-of them (the feed the gantry is driven at), with the acceleration GRBL allows along the move's
-direction (the smallest ``acceleration_deg_s2 / |u_i|`` over the moving axes, ``u`` the unit
-direction in rig degrees). From rest to rest, a trapezoid of distance ``d`` takes ``d / v + v /
-a`` when it reaches cruise speed and ``2 sqrt(d / a)`` otherwise.
+The motion model is :mod:`rig.motion_time`'s (every axis at once, each Dynamixel axis its own
+trapezoid, the GRBL axes one straight move): the tours minimise its move times and a schedule's
+``motion_s`` is its sum.
 
 Two orderings build a :class:`Schedule` (the stops the rig makes, in order):
 
@@ -39,6 +35,7 @@ from numpy.typing import NDArray
 
 from core.progress import progress_bar
 from rig.config import RigConfig
+from rig.motion_time import move_seconds, move_seconds_matrix, path_seconds, pose_row
 from rig.pose import ROLES, RigPose
 from rig.safety import path_violation, pose_violation
 
@@ -50,9 +47,6 @@ __all__ = [
     "Schedule",
     "Stop",
     "Unplaced",
-    "move_seconds",
-    "move_seconds_matrix",
-    "path_seconds",
     "schedules",
 ]
 
@@ -175,70 +169,6 @@ class PlanEstimate:
         """``gain_s`` as a fraction of the serpentine ordering's whole duration."""
         baseline = self.duration_s("serpentine")
         return self.gain_s / baseline if baseline > 0 else 0.0
-
-
-def _trapezoid_s(distance: FloatArray, velocity: float, acceleration: FloatArray) -> FloatArray:
-    with np.errstate(all="ignore"):  # a zero distance (maybe with a zero acceleration) is 0 s
-        ramp = velocity / acceleration
-        cruise = distance / velocity + ramp
-        triangle = 2.0 * np.sqrt(distance / acceleration)
-        return np.where(
-            distance <= 0.0, 0.0, np.where(distance < velocity * ramp, triangle, cruise)
-        )
-
-
-def move_seconds_matrix(config: RigConfig, start: FloatArray, end: FloatArray) -> FloatArray:
-    """Motion time of every move from ``start[i]`` to ``end[j]``, seconds.
-
-    Parameters
-    ----------
-    config : RigConfig, whose axes' speeds are used
-    start, end : ndarray, shapes (n, 5) and (m, 5), degrees in :data:`rig.pose.ROLES` order
-
-    Returns
-    -------
-    ndarray, shape (n, m)
-    """
-    delta = np.abs(end[None, :, :] - start[:, None, :])
-    seconds = np.zeros(delta.shape[:2])
-    axes = [(i, config.axes[r]) for i, r in enumerate(ROLES) if r in config.axes]
-    for i, axis in axes:
-        if axis.device == "dynamixel":
-            acceleration = np.full(delta.shape[:2], axis.acceleration_deg_s2)
-            part = _trapezoid_s(delta[..., i], axis.velocity_deg_s, acceleration)
-            seconds = np.maximum(seconds, part)
-    gantry = [(i, axis) for i, axis in axes if axis.device == "grbl"]
-    if gantry:
-        columns = [i for i, _ in gantry]
-        length = np.sqrt(np.sum(delta[..., columns] ** 2, axis=-1))
-        feed_deg_s = min(axis.feed_deg_min for _, axis in gantry) / 60.0
-        acceleration = np.full(length.shape, np.inf)
-        with np.errstate(all="ignore"):  # an axis that does not move does not limit
-            for i, axis in gantry:
-                allowed = axis.acceleration_deg_s2 * length / delta[..., i]
-                acceleration = np.minimum(
-                    acceleration, np.where(delta[..., i] > 0, allowed, np.inf)
-                )
-        acceleration = np.where(np.isfinite(acceleration), acceleration, 1.0)
-        seconds = np.maximum(seconds, _trapezoid_s(length, feed_deg_s, acceleration))
-    return seconds
-
-
-def _row(pose: RigPose) -> FloatArray:
-    return np.array([value for _, value in pose.items()], dtype=np.float64)
-
-
-def move_seconds(config: RigConfig, start: RigPose, end: RigPose) -> float:
-    """Motion time of the straight move from ``start`` to ``end``, seconds."""
-    return float(move_seconds_matrix(config, _row(start)[None], _row(end)[None])[0, 0])
-
-
-def path_seconds(config: RigConfig, poses: Sequence[RigPose]) -> float:
-    """Motion time along consecutive poses, seconds."""
-    if len(poses) < 2:
-        return 0.0
-    rows = np.array([_row(p) for p in poses])
-    return float(move_seconds_matrix(config, rows[:-1], rows[1:]).diagonal().sum())
 
 
 def _pose(camera: Angles, light: Angles) -> RigPose:
@@ -384,7 +314,7 @@ class _Safety:
 
     def _sampled_safe(self, start: RigPose, end: RigPose) -> bool:
         """The separation at path_violation's samples, vectorised (its limits hold already)."""
-        a, b = _row(start), _row(end)
+        a, b = pose_row(start), pose_row(end)
         count = max(1, math.ceil(float(np.max(np.abs(b - a))) / self.config.safety.path_step_deg))
         poses = a + np.linspace(0.0, 1.0, count + 1)[:, None] * (b - a)
         camera = np.radians(poses[:, 1]), np.radians(poses[:, 0])

@@ -24,6 +24,7 @@ from rig.config import XM430_W350, AxisConfig, RigConfig
 from rig.devices import Camera, Frame, LightState, close_after
 from rig.dynamixel import DynamixelChain, ServoAxisConfig
 from rig.grbl import GantryAxes, GantryAxisConfig, GrblGantry
+from rig.motion_time import trapezoid_s
 from rig.pose import RigPose
 from rig.safety import check_path, check_pose, escape_violation, pose_violation
 
@@ -71,14 +72,6 @@ def gantry_axis(axis: AxisConfig) -> GantryAxisConfig:
     )
 
 
-def _move_seconds(distance_deg: float, velocity: float, acceleration: float) -> float:
-    """Duration of a trapezoidal (or triangular) move from rest to rest."""
-    ramp = velocity / acceleration
-    if distance_deg < velocity * ramp:
-        return 2.0 * (distance_deg / acceleration) ** 0.5
-    return distance_deg / velocity + ramp
-
-
 class ServoArm:
     """The Dynamixel axes of a config (the camera arm, a turntable) as :class:`PoseAxes`."""
 
@@ -114,10 +107,10 @@ class ServoArm:
         return self.chain.positions_deg()
 
     def seconds_to(self, start: Mapping[str, float], end: Mapping[str, float]) -> float:
-        """Time the slowest axis needs for the move (its profile), seconds."""
+        """Time the slowest axis needs for the move (its trapezoid), seconds."""
         return max(
             (
-                _move_seconds(abs(end[r] - start[r]), a.velocity_deg_s, a.acceleration_deg_s2)
+                float(trapezoid_s(abs(end[r] - start[r]), a.velocity_deg_s, a.acceleration_deg_s2))
                 for r, a in self._axes.items()
                 if r in end
             ),

@@ -3,7 +3,6 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import json
-import math
 from collections import Counter
 from pathlib import Path
 
@@ -16,11 +15,10 @@ from capture.grid_plan import grid_plan
 from capture.journal import ImageKey
 from capture.plan import IMAGE_OVERHEAD_S, CalibrationCapture, CaptureEvent, SweepPlan
 from capture.plan_file import load_plan, parse_plan
-from capture.plan_order import move_seconds
 from core.directions import direction_from_angles_deg
 from core.errors import InputError
 from rig.config import AxisConfig, LightConfig, RigConfig, load_config, simulated_config
-from rig.hardware import _move_seconds
+from rig.motion_time import move_seconds
 from rig.pose import RigPose
 from rig.safety import ForbiddenZone, SafetyConfig, path_violation, pose_violation
 
@@ -412,25 +410,6 @@ def test_missing_plan_file(tmp_path: Path) -> None:
 
 
 # -- ordering and estimates ---------------------------------------------------------------------
-
-
-def test_motion_model_mirrors_the_hardware() -> None:
-    config = _config()
-    servo = config.axes["camera_azimuth"]
-    start = RigPose(0, 45, 0, 45)
-    # A servo move alone: the driver's trapezoid.
-    expected = _move_seconds(100.0, servo.velocity_deg_s, servo.acceleration_deg_s2)
-    assert move_seconds(config, start, RigPose(100, 45, 0, 45)) == pytest.approx(expected)
-    # A diagonal gantry move: one straight move along its length at the feed.
-    feed = config.axes["light_azimuth"].feed_deg_min / 60.0
-    length = math.hypot(30.0, 40.0)
-    acceleration = 360.0 * length / 40.0  # the axis carrying the most of the move limits it
-    gantry = length / feed + feed / acceleration
-    assert move_seconds(config, start, RigPose(0, 45, 30, 85)) == pytest.approx(gantry)
-    # Together: the slower part.
-    both = move_seconds(config, start, RigPose(100, 45, 30, 85))
-    assert both == pytest.approx(max(expected, gantry))
-    assert move_seconds(config, start, start) == 0.0
 
 
 def test_estimate_counts_and_duration() -> None:
