@@ -67,11 +67,10 @@ def _run_batch(args: argparse.Namespace) -> int:
     from core.camera_model import PinholeCamera
     from core.field_store import ReflectanceField
     from processing.panorama import read_panorama
-    from processing.sample_model_store import default_models_path
+    from processing.sample_model_store import default_models_path, models_for_field
     from render.batch import BatchPlan, read_batch_frames, relight_batch
     from render.output import write_sequence
-    from render.relight_mode import RelightMode, most_accurate_mode
-    from render.relighter import RelightSettings
+    from render.relighting import ModeRequest, choose_mode
 
     if args.output.exists():
         raise InputError(f"{args.output}: exists; choose another path or remove it")
@@ -100,22 +99,18 @@ def _run_batch(args: argparse.Namespace) -> int:
                                *(args.size or BATCH_VIEW_SIZE))  # fmt: skip
     started = time.perf_counter()
     with cluster_for(args) as client:
-        models_path = None
-        mode: RelightMode
-        if args.paper:
-            mode = RelightSettings.paper_configuration()
-        else:
-            if not default_models_path(field.path).exists():
-                from processing.sample_model_store import write_sample_models
-                from processing.sample_models import fit_sample_models
-
-                fitted = fit_sample_models(field, memory_bytes=args.max_memory, client=client,
-                                           progress=not args.quiet)  # fmt: skip
-                write_sample_models(default_models_path(field.path), fitted, field)
-            choice = most_accurate_mode(field, progress=not args.quiet)
-            print(f"relighting mode: {choice.reason}", file=sys.stderr)
-            mode = choice.mode
-            models_path = str(default_models_path(field.path)) if mode.uses_models else None
+        models = None
+        if not args.paper:
+            # Fitted once here (on the cluster), read by every task.
+            models = models_for_field(field, memory_bytes=args.max_memory, client=client,
+                                      progress=not args.quiet)  # fmt: skip
+        # One mode for every environment: chosen on held-out lights, not under one panorama.
+        chosen = choose_mode(field, ModeRequest(paper=args.paper), None, models=models,
+                             progress=not args.quiet)  # fmt: skip
+        if chosen.reason is not None:
+            print(f"relighting mode: {chosen.reason}", file=sys.stderr)
+        mode = chosen.mode
+        models_path = str(default_models_path(field.path)) if mode.uses_models else None
         plan = BatchPlan(
             field=str(field.path), mode=mode, models=models_path,
             panoramas=tuple(str(p) for p in args.env), camera=camera, sequence=args.sequence,

@@ -9,7 +9,6 @@ sequence. ``--lights`` is :func:`app.cli_evaluate.relight_lights`.
 from __future__ import annotations
 
 import argparse
-import contextlib
 from pathlib import Path
 from typing import Any
 
@@ -152,9 +151,13 @@ def _relight_field(
 ) -> int:
     from core.camera_model import PinholeCamera
     from core.splat import require_outside
-    from processing.panorama import adjust_panorama, visible_environment
     from render.output import IMAGE_SUFFIXES, write_image, write_sequence
-    from render.relight_mode import open_relighter
+    from render.relighting import (
+        LightingControls,
+        RelightRequest,
+        prepare_relighting,
+        relighting_notes,
+    )
     from render.sequence import relight_sequence
 
     resample_to, native = None, (0, 0)
@@ -173,28 +176,22 @@ def _relight_field(
         width, height = args.size or DEFAULT_VIEW_SIZE
         camera = PinholeCamera(args.view[0], args.view[1], args.distance, args.fov, width, height)
         require_outside(field.points, camera)  # before the mode is chosen (a fit can be slow)
-    s_count, t_count, _ = field.shape
-    for flag, value, have, what in (("-m", args.m, t_count, "lights"),
-                                    ("-n", args.n, s_count, "cameras")):  # fmt: skip
-        if value is not None and value > have:
-            raise InputError(f"{flag} {value}: {args.field} has only {have} measured {what}")
     if suffix not in IMAGE_SUFFIXES:
         if args.sequence == "turntable" and field.sample_kind == "pixels":
             raise RigError(f"{args.field} holds one fixed view: use --sequence environment")
-    # The panorama as the object sees it, for the choice and the guards (the engines apply the
-    # same yaw, exposure and horizon themselves).
-    relit = visible_environment(
-        adjust_panorama(panorama, yaw_deg=args.yaw, exposure=args.exposure), field.below_horizon
+    lighting = LightingControls(yaw_deg=args.yaw, exposure=args.exposure, modulation=modulation)
+    request = RelightRequest(
+        panorama=panorama, camera=camera, lighting=lighting, mode=_mode_request(args)
     )
-    mode, models, comparison = _relight_mode(args, field, relit)
-    for warning in _relight_warnings(field, camera, relit, mode, models, comparison):
+    prepared = prepare_relighting(field, request, progress=True)
+    for score in prepared.chosen.scores:
+        print(f"  {score.name:<22} {score.error:7.2%}  ({score.seconds:.1f} s)")
+    if prepared.chosen.reason is not None:
+        print(f"relighting mode: {prepared.chosen.reason}")
+    for warning in prepared.warnings:
         print(warning)
-    relighter = open_relighter(field, mode, models)
-    lighting = {"yaw_deg": args.yaw, "exposure": args.exposure, "modulation": modulation}
     if suffix in IMAGE_SUFFIXES:
-        relighter.set_lighting(panorama, **lighting)
-        relighter.set_view(camera)
-        image = relighter.render()
+        image = prepared.engine.render()
         if args.renderer == "pyvista":
             _write_pyvista_picture(args, field, camera, image)
         elif resample_to is not None:
@@ -203,11 +200,13 @@ def _relight_field(
                         resample(image.coverage, resample_to))  # fmt: skip
         else:
             write_image(args.output, image.rgb, image.coverage)
-        _report_relit(args, image.holes, image.outside_fraction, mode.uses_models)
+        print(f"{args.field} under {args.env} -> {args.output}")
+        for note in relighting_notes(image, uses_models=prepared.chosen.mode.uses_models):
+            print(note)
         return 0
     frames = relight_sequence(
-        relighter, panorama, camera, kind=args.sequence, frames=args.frames, progress=True,
-        **lighting,
+        prepared.engine, panorama, camera, kind=args.sequence, frames=args.frames,
+        progress=True, yaw_deg=args.yaw, exposure=args.exposure, modulation=modulation,
     )  # fmt: skip
     if resample_to is not None:
         say_resampled(native, resample_to)
@@ -217,90 +216,16 @@ def _relight_field(
     return 0
 
 
-def _relight_warnings(
-    field: Any, camera: Any, relit: Any, mode: Any, models: Any, comparison: Any
-) -> list[Any]:
-    """What to expect of this relighting (``render.guards.relight_warnings``).
+def _mode_request(args: argparse.Namespace) -> Any:
+    """The flags of ``rig relight`` that steer the mode, as a ``render.relighting.ModeRequest``."""
+    from render.relighting import ModeRequest
 
-    The guards see the panorama as relit (yaw and exposure applied). Interpolation modes
-    without a fit in hand read the fit saved beside the field, if any: its lobe and
-    leave-one-out error inform the ghosting, sun and noise guards. The held-out comparison
-    of the default choice, when it was made, decides whether they advise the models.
-    """
-    from processing.sample_model_store import default_models_path, read_sample_models
-    from render.guards import relight_warnings
-
-    saved = default_models_path(field.path)
-    if not mode.uses_models and models is None and saved.exists():
-        with contextlib.suppress(RigError):
-            models = read_sample_models(saved, field)
-    return relight_warnings(field, camera, relit.rgb, mode, models, comparison)
-
-
-def _relight_mode(args: argparse.Namespace, field: Any, relit: Any) -> tuple[Any, Any, Any]:
-    """The relighting mode the flags ask for, and what informs it.
-
-    Returns the mode, the field's models when it needs them, and the held-out comparison
-    when the mode was chosen by it (else None). ``relit``: the panorama as the object sees it.
-    """
-    from dataclasses import replace
-
-    from processing.sample_model_store import models_for_field
-    from render.model_relight import ModelLightingMode, ModelRelightSettings
-    from render.relight_mode import MOST_ACCURATE_MODELS, most_accurate_mode
-    from render.relighter import RelightSettings
-
-    k = 64 if args.k is None else args.k
-    if args.paper:
-        return RelightSettings.paper_configuration(k=k), None, None
-    if args.scheme == "model":
-        lighting: ModelLightingMode = "grid" if args.k is None else "sampled"
-        mode = ModelRelightSettings(
-            model=args.model, lighting=lighting, k=k, sampler=args.sampler, grid_height=args.grid
-        )
-        return mode, models_for_field(field, args.models, progress=True), None
-    flags = (args.scheme, args.interp, args.view_interp, args.k, args.m, args.n)
-    if args.method != "auto" or (field.sample_kind == "pixels" and all(f is None for f in flags)):
-        # A saved fit (--models) serves the choice and the engine instead of a new one.
-        saved = None if args.models is None else models_for_field(field, args.models)
-        return _pixel_field_mode(args, field, relit, saved), saved, None
-    if all(flag is None for flag in flags):
-        choice = most_accurate_mode(field, models_path=args.models, progress=True)
-        print(f"relighting mode: {choice.reason}")
-        if choice.mode == MOST_ACCURATE_MODELS:
-            mode = replace(MOST_ACCURATE_MODELS, grid_height=args.grid)
-            return mode, choice.models, choice.comparison
-        return choice.mode, choice.models, choice.comparison  # they inform the warnings
-    settings = RelightSettings(args.scheme or "sampled", k=k, sampler=args.sampler,
-                               m=args.m or 3, n=args.n or 3)  # fmt: skip
-    if args.interp:
-        settings = replace(settings, interpolation=args.interp)
-    if args.view_interp:
-        settings = replace(settings, view_interpolation=args.view_interp)
-    return settings, None, None
-
-
-def _pixel_field_mode(args: argparse.Namespace, field: Any, relit: Any, models: Any) -> Any:
-    """``--method`` (or its automatic choice under the panorama) on a field of pixels."""
-    from render.environment_choice import choose_environment_mode, environment_mode
-
-    if field.sample_kind != "pixels":
-        raise InputError(
-            f"--method relights a field of pixels (an RTI capture); {args.field} is a field of "
-            "points: use --scheme (model, or an interpolation scheme)"
-        )
-    flags = ("--scheme", "--interp", "--view-interp", "-k", "-m", "-n")
-    given = [f for f, v in zip(flags, (args.scheme, args.interp, args.view_interp, args.k,
-                                       args.m, args.n), strict=True) if v is not None]  # fmt: skip
-    if given:
-        raise InputError(f"--method {args.method} chooses the relighting; drop {', '.join(given)}")
-    if args.method != "auto":
-        return environment_mode(args.method, progress=True)
-    choice = choose_environment_mode(field, relit, models=models, fast=args.fast, progress=True)
-    for score in choice.scores:
-        print(f"  {score.name:<22} {score.error:7.2%}  ({score.seconds:.1f} s)")
-    print(f"relighting mode: {choice.reason}")
-    return choice.mode
+    return ModeRequest(
+        paper=args.paper, scheme=args.scheme, k=args.k, sampler=args.sampler,
+        interpolation=args.interp, view_interpolation=args.view_interp, m=args.m, n=args.n,
+        model=args.model, grid=args.grid, method=args.method, fast=args.fast,
+        models_path=args.models,
+    )  # fmt: skip
 
 
 def _write_pyvista_picture(args: argparse.Namespace, field: Any, camera: Any, image: Any) -> None:
@@ -322,19 +247,3 @@ def _write_pyvista_picture(args: argparse.Namespace, field: Any, camera: Any, im
             field.points, field.normals, np.ascontiguousarray(colours), camera, spacing
         ),
     )
-
-
-def _report_relit(args: argparse.Namespace, holes: Any, outside: float, models: bool) -> None:
-    print(f"{args.field} under {args.env} -> {args.output}")
-    if holes.any():
-        print(f"warning: {int(holes.sum())} visible samples are seen by no chosen camera (holes)")
-    if outside > 0.05 and not models:
-        print(
-            f"warning: {outside:.0%} of the light comes from outside the measured lights "
-            "(below the lowest ring, say); it is moved to the nearest measured lights"
-        )
-    elif outside > 0.05:
-        print(
-            f"note: {outside:.0%} of the light comes from outside the measured lights; the "
-            "fitted models shade it, its cast shadows are extrapolated from the measured ones"
-        )

@@ -90,6 +90,7 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
     from render.output import display_picture, write_sequence
     from render.relight_mode import most_accurate_mode, open_relighter
     from render.relighter import RelightSettings, best_settings
+    from render.relighting import RelightRequest, prepare_relighting
     from render.sequence import relight_sequence
     from render.tonemap import auto_exposure
     from sim.field import field_cameras, simulate_field
@@ -132,9 +133,8 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
             "best": (best, choice.mode),
         }
         for name, (label, mode) in methods.items():
-            relighter = open_relighter(field, mode, choice.models)
-            relighter.set_lighting(panorama)
-            relighter.set_view(view)
+            request = RelightRequest(panorama=panorama, camera=view, mode=mode)
+            relighter = prepare_relighting(field, request, models=choice.models).engine
             start = time.perf_counter()
             image = relighter.render()
             ms = (time.perf_counter() - start) * 1e3
@@ -160,13 +160,12 @@ def _rti_demo(out: Path) -> list[str]:
     import numpy as np
 
     from core.image_io import write_srgb8
-    from processing.panorama import read_panorama, visible_environment
+    from processing.panorama import read_panorama
     from processing.rti import open_field_or_rti
     from processing.sample_model_store import models_for_field
     from processing.sample_models import choose_model, format_loo_table, interpolation_loo
-    from render.environment_choice import choose_environment_mode
     from render.output import display_picture
-    from render.relight_mode import open_relighter
+    from render.relighting import ModeRequest, RelightRequest, relight_request
 
     lines = ["## Relighting a real RTI capture", ""]
     lp = rti_capture_path()
@@ -180,16 +179,14 @@ def _rti_demo(out: Path) -> list[str]:
         for name in ("courtyard", "studio"):
             # As rig relight CAPTURE --env PANO --fast does: the rung chosen under the panorama.
             panorama = read_panorama(panorama_path(name))
-            seen = visible_environment(panorama, field.below_horizon)
-            choice = choose_environment_mode(field, seen, fast=True)
-            relighter = open_relighter(field, choice.mode)
-            relighter.set_view(field.cameras[0])
-            relighter.set_lighting(panorama)
-            image = relighter.render()
-            picture = display_picture(image.rgb, image.coverage)
+            request = RelightRequest(
+                panorama=panorama, camera=field.cameras[0], mode=ModeRequest(fast=True)
+            )
+            relit = relight_request(field, request)
+            picture = display_picture(relit.image.rgb, relit.image.coverage)
             target = out / "relight" / "rti" / f"{name}.png"
             write_srgb8(target, np.repeat(np.repeat(picture, 4, axis=0), 4, axis=1))
-            lines.append(f"- under {name}: [png](relight/rti/{name}.png); {choice.reason}")
+            lines.append(f"- under {name}: [png](relight/rti/{name}.png); {relit.chosen.reason}")
         models = models_for_field(field)
         lines += ["", "Leave-one-light-out error:", ""]
         lines.append(format_loo_table(choose_model(models).table, extra={

@@ -95,7 +95,7 @@ def _advise_captured(
     from core.field_store import ReflectanceField
     from processing.sample_model_store import models_for_field
     from render.advisor import Advisor, capture_density
-    from render.relight_mode import open_relighter
+    from render.relighting import RelightRequest, relight_request
     from sim.ground_truth import render_environment
     from sim.scenes import build_scene
 
@@ -114,10 +114,11 @@ def _advise_captured(
                          height=size)  # fmt: skip
         samples = build_scene(DEMO_SCENE, field.shape[2])
         truth = render_environment(samples, panorama.rgb, camera, grid_height=64)
-        engine = open_relighter(field, advice.choice.candidate.mode, models_for_field(field))
-        engine.set_lighting(panorama)
-        engine.set_view(camera)
-        relit_error = _image_error(engine.render(), truth)
+        request = RelightRequest(
+            panorama=panorama, camera=camera, mode=advice.choice.candidate.mode
+        )
+        relit = relight_request(field, request, models=models_for_field(field))
+        relit_error = _image_error(relit.image, truth)
         lines.append(
             f"The choice relit at a view between the captured cameras: {relit_error:.2%} against "
             f"the ground truth (image; predicted {advice.choice.error:.2%} over the samples)."
@@ -181,8 +182,9 @@ def _relight_captured(out: Path, field_path: Path, panorama: Panorama, quick: bo
     from core.image_io import write_srgb8
     from render.model_relight import ModelRelightSettings
     from render.output import display_picture
-    from render.relight_mode import RelightMode, most_accurate_mode, open_relighter
+    from render.relight_mode import RelightMode, most_accurate_mode
     from render.relighter import RelightSettings
+    from render.relighting import RelightRequest, relight_request
     from render.tonemap import auto_exposure
     from sim.ground_truth import render_environment
     from sim.scenes import build_scene
@@ -214,10 +216,8 @@ def _relight_captured(out: Path, field_path: Path, panorama: Panorama, quick: bo
         row = [_labelled(display_picture(truth.rgb, truth.coverage, exposure), "ground truth")]
         cells = []
         for name, mode in methods.items():
-            engine = open_relighter(field, mode, choice.models)
-            engine.set_lighting(panorama)
-            engine.set_view(camera)
-            image = engine.render()
+            request = RelightRequest(panorama=panorama, camera=camera, mode=mode)
+            image = relight_request(field, request, models=choice.models).image
             error = _image_error(image, truth)
             picture = display_picture(image.rgb, image.coverage, exposure)
             write_srgb8(out / "capture" / "relit" / f"{view_name}-{name}.png", picture)

@@ -315,6 +315,8 @@ def models_for_field(
     path: str | os.PathLike[str] | None = None,
     *,
     models: Sequence[str] | None = None,
+    memory_bytes: int | None = None,
+    client: Any = None,
     progress: bool = False,
 ) -> SampleModels:
     """The fit of ``field``: read from ``path`` (default beside the field) or fitted and saved.
@@ -324,6 +326,7 @@ def models_for_field(
     replaced. A stale fit at an explicit ``path`` is refused (:class:`StaleFitError`) rather
     than replaced: the caller named that file. A store in a read-only place is fitted without
     saving. Only the requested models are read from the file (``models`` None: every one).
+    ``memory_bytes`` and ``client`` (a Dask client) are the fit's, when there is one.
     """
     target = default_models_path(field.path) if path is None else Path(path)
     if target.exists():
@@ -337,7 +340,11 @@ def models_for_field(
                 return saved
     if output_problem(target) is not None:
         # Relighting does not need the file (the next run fits again): fitted in memory.
-        return fit_sample_models(field, models, progress=progress)
+        return fit_sample_models(
+            field, models, memory_bytes=memory_bytes, client=client, progress=progress
+        )
     # Written as it is fitted, then read: the fit is never held twice, nor whole while fitted.
-    layout = fit_to_file(field, target, models, progress=progress)
+    layout = fit_to_file(
+        field, target, models, memory_bytes=memory_bytes, client=client, progress=progress
+    )
     return read_sample_models(target, field, models=layout.names)

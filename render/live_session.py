@@ -33,12 +33,12 @@ from core.splat import require_outside
 from processing.environment import EnvironmentLighting
 from processing.panorama import Panorama
 from processing.sampling import SAMPLERS, SamplerName
-from render.guards import relight_warnings
 from render.model_relight import ModelRelighter, ModelRelightSettings
 from render.output import display_picture
 from render.overlay import sample_overlay
 from render.relight_mode import ModeChoice, RelightEngine, RelightMode
 from render.relighter import RelightSettings, RelitImage
+from render.relighting import ChosenMode, relighting_warnings
 from render.tonemap import auto_exposure, display_8bit
 
 __all__ = [
@@ -462,10 +462,10 @@ class LiveSession:
         frame = self._last_frame()
         key = (*frame.controls.lighting_key(), frame.camera)
         if key not in self._warnings:
-            found = relight_warnings(
-                self.field, frame.camera, frame.environment.panorama.rgb, frame.relight_mode,
-                self.best.models, self.best.comparison,
-            )  # fmt: skip
+            chosen = ChosenMode(frame.relight_mode, self.best.models, self.best.comparison)
+            found = relighting_warnings(
+                self.field, frame.camera, frame.environment.panorama, chosen
+            )
             remedy = "--scheme model"
             if self.best.mode.uses_models:
                 remedy = "the viewer's best mode"
