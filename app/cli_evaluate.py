@@ -166,7 +166,7 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
     from core.camera_model import camera_to_rig
     from core.image_io import write_exr, write_srgb8
     from core.lp_format import read_lp
-    from processing.image_quality import display_8bit, display_scale
+    from processing.image_quality import clipped_srgb_8bit, display_scale
     from render.light_prediction import make_predictor
     from render.rung_choice import choose_light_rung
 
@@ -213,7 +213,7 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
         image = views(values)
         if resample_to is not None:
             image = resample(np.asarray(image, dtype=np.float32), resample_to)
-        write_srgb8(stem.with_suffix(".png"), display_8bit(image, scale))
+        write_srgb8(stem.with_suffix(".png"), clipped_srgb_8bit(image, scale))
         if args.exr:
             write_exr(stem.with_suffix(".exr"), np.asarray(image, dtype=np.float32))
     print(f"{len(lights)} images under {args.lights} ({method}) -> {directory}/")

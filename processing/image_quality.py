@@ -42,8 +42,8 @@ __all__ = [
     "DISPLAY_PERCENTILE",
     "SSIM_WINDOW",
     "ImageQuality",
+    "clipped_srgb_8bit",
     "delta_e2000",
-    "display_8bit",
     "display_scale",
     "image_quality",
     "psnr_8bit",
@@ -94,10 +94,29 @@ def display_scale(reference: NDArray[np.floating], mask: NDArray[np.bool_] | Non
     return 1.0 / level if level > 0 else 1.0
 
 
-def display_8bit(linear: NDArray[np.floating], scale: float = 1.0) -> NDArray[np.uint8]:
-    """Linear RGB as the 8-bit sRGB values a display (and the RTI tools) would hold."""
+def clipped_srgb_8bit(linear: NDArray[np.floating], scale: float = 1.0) -> NDArray[np.uint8]:
+    """Linear RGB as the 8-bit sRGB values a display (and the RTI tools) would hold.
+
+    No tone mapping (for a picture to look at, :func:`render.tonemap.tone_mapped_8bit`
+    compresses highlights instead): the values are scaled, clipped to [0, 1], sRGB-encoded and
+    rounded, as the RTI literature computes its display metrics.
+
+    Parameters
+    ----------
+    linear : ndarray, shape (..., 3), linear RGB
+    scale : float, the linear value shown as white is ``1 / scale`` (:func:`display_scale`)
+
+    Returns
+    -------
+    ndarray, shape (..., 3), uint8, sRGB-encoded levels
+    """
     encoded = linear_to_srgb(np.clip(np.asarray(linear, dtype=np.float64) * scale, 0.0, 1.0))
     return np.round(np.asarray(encoded, dtype=np.float64) * 255.0).astype(np.uint8)
+
+
+#: The former name of :func:`clipped_srgb_8bit`, for ``app/light_view.py`` until it is moved
+#: to the new name (another session edits it); not exported.
+display_8bit = clipped_srgb_8bit
 
 
 def psnr_8bit(
@@ -109,8 +128,8 @@ def psnr_8bit(
 ) -> float:
     """PSNR in dB of the 8-bit sRGB images over the masked pixels (inf when identical)."""
     p, r, m = _checked(predicted, reference, mask)
-    a = display_8bit(p, scale)[m].astype(np.float64)
-    b = display_8bit(r, scale)[m].astype(np.float64)
+    a = clipped_srgb_8bit(p, scale)[m].astype(np.float64)
+    b = clipped_srgb_8bit(r, scale)[m].astype(np.float64)
     mse = float(np.mean((a - b) ** 2))
     return math.inf if mse == 0 else 20.0 * math.log10(255.0) - 10.0 * math.log10(mse)
 
@@ -134,8 +153,8 @@ def ssim_8bit(
             f"{p.shape[1]}x{p.shape[0]}"
         )
     _, full = structural_similarity(  # type: ignore[no-untyped-call]  # skimage: untyped
-        display_8bit(p, scale),
-        display_8bit(r, scale),
+        clipped_srgb_8bit(p, scale),
+        clipped_srgb_8bit(r, scale),
         channel_axis=2,
         data_range=255,
         gaussian_weights=True,
@@ -158,8 +177,8 @@ def delta_e2000(
 ) -> float:
     """Mean CIEDE2000 difference over the masked pixels, from the display sRGB values."""
     p, r, m = _checked(predicted, reference, mask)
-    lab_p = rgb2lab(display_8bit(p, scale)[m][None].astype(np.float64) / 255.0)
-    lab_r = rgb2lab(display_8bit(r, scale)[m][None].astype(np.float64) / 255.0)
+    lab_p = rgb2lab(clipped_srgb_8bit(p, scale)[m][None].astype(np.float64) / 255.0)
+    lab_r = rgb2lab(clipped_srgb_8bit(r, scale)[m][None].astype(np.float64) / 255.0)
     difference = deltaE_ciede2000(lab_r, lab_p)  # type: ignore[no-untyped-call]
     return float(np.mean(difference))
 

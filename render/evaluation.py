@@ -43,7 +43,7 @@ from core.progress import progress_bar
 from processing.image_quality import (
     SSIM_WINDOW,
     ImageQuality,
-    display_8bit,
+    clipped_srgb_8bit,
     display_scale,
     image_quality,
 )
@@ -144,7 +144,7 @@ def held_out_errors(
     truths = [test.camera_slab(s)[:, test.visibility[s]] for s in range(test.shape[0])]
     rti = field.provenance.get("source") == "rti"
     scale = 1.0 if rti else display_scale(np.concatenate([t.reshape(-1, 3) for t in truths]))
-    shown = [display_8bit(t, scale).astype(np.float64) for t in truths]
+    shown = [clipped_srgb_8bit(t, scale).astype(np.float64) for t in truths]
     energy = sum(float(np.sum(t.astype(np.float64) ** 2)) for t in truths)
     count = sum(t.size for t in truths)
     errors: dict[str, HeldOutError] = {}
@@ -154,7 +154,7 @@ def held_out_errors(
         for s, (truth, seen) in enumerate(zip(truths, shown, strict=True)):
             predicted = predictor.predict(s, test.light_directions)[:, test.visibility[s]]
             squared += float(np.sum((predicted - truth) ** 2))
-            displayed += float(np.sum((display_8bit(predicted, scale) - seen) ** 2))
+            displayed += float(np.sum((clipped_srgb_8bit(predicted, scale) - seen) ** 2))
         mse = displayed / count if count else 0.0
         errors[name] = HeldOutError(
             math.sqrt(squared / energy) if energy > 0 else 0.0,

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from core.atomic import atomic_path
 from core.errors import InputError
 from core.image_io import write_exr, write_srgb8
-from render.tonemap import auto_exposure, display_8bit
+from render.tonemap import auto_exposure, tone_mapped_8bit
 
 __all__ = [
     "IMAGE_SUFFIXES",
@@ -38,7 +38,7 @@ def display_picture(
     if exposure is None:
         covered = np.asarray(rgb)[coverage]
         exposure = auto_exposure(covered) if covered.size else 1.0
-    return display_8bit(rgb, exposure=exposure)
+    return tone_mapped_8bit(rgb, exposure=exposure)
 
 
 def write_image(

@@ -9,7 +9,7 @@ from numpy.typing import NDArray
 from core.directions import panorama_pixel_from_direction
 from core.errors import InputError
 from core.light_set import LightSet
-from render.tonemap import display_8bit
+from render.tonemap import tone_mapped_8bit
 
 __all__ = ["cell_borders", "disassembled_picture", "sample_overlay"]
 
@@ -33,7 +33,7 @@ def sample_overlay(
 ) -> NDArray[np.uint8]:
     """The tone-mapped panorama with Voronoi cell borders and sample points; (H, W, 3) uint8."""
     height, width = rgb.shape[:2]
-    picture = display_8bit(rgb, exposure=exposure)
+    picture = tone_mapped_8bit(rgb, exposure=exposure)
     if lights.labels is None:
         raise InputError("the lights have no cells to draw: they did not come from a panorama")
     picture[cell_borders(lights.labels)] = BORDER_RGB
@@ -48,4 +48,4 @@ def sample_overlay(
 
 def disassembled_picture(lights: LightSet, *, exposure: float) -> NDArray[np.uint8]:
     """Each Voronoi cell filled with its light's mean radiance, tone-mapped; (H, W, 3) uint8."""
-    return display_8bit(lights.to_panorama(), exposure=exposure)
+    return tone_mapped_8bit(lights.to_panorama(), exposure=exposure)

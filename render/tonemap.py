@@ -8,7 +8,7 @@ from numpy.typing import NDArray
 
 from core.colour import REC709_LUMINANCE, linear_to_srgb, luminance
 
-__all__ = ["auto_exposure", "display_8bit", "to_uint8", "tone_map"]
+__all__ = ["auto_exposure", "to_uint8", "tone_map", "tone_mapped_8bit"]
 
 #: Scene key: the log-average luminance is mapped to this display value (Reinhard et al. 2002).
 KEY = 0.18
@@ -49,11 +49,24 @@ def to_uint8(encoded: NDArray[np.floating]) -> NDArray[np.uint8]:
     return np.round(np.clip(np.nan_to_num(encoded, nan=0.0), 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-def display_8bit(rgb: NDArray[np.floating], *, exposure: float | None = None) -> NDArray[np.uint8]:
+def tone_mapped_8bit(
+    rgb: NDArray[np.floating], *, exposure: float | None = None
+) -> NDArray[np.uint8]:
     """``to_uint8(tone_map(rgb, exposure=exposure))`` in one pass: 8-bit sRGB (..., 3).
 
-    The same operations in the same (float32) precision, per pixel in parallel: a viewer
-    shows one such picture a frame, and numpy's temporaries took 16 ms of a 512 x 512 frame.
+    A picture to look at: highlights are compressed (Reinhard), not clipped as in the metrics'
+    :func:`processing.image_quality.clipped_srgb_8bit`. The same operations in the same
+    (float32) precision as :func:`tone_map`, per pixel in parallel: a viewer shows one such
+    picture a frame, and numpy's temporaries took 16 ms of a 512 x 512 frame.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (..., 3), linear radiance (NaN shows black, infinity white)
+    exposure : float or None, the linear scale before tone mapping (None: :func:`auto_exposure`)
+
+    Returns
+    -------
+    ndarray, shape (..., 3), uint8, sRGB-encoded levels
     """
     linear = np.asarray(rgb)
     if linear.dtype != np.float32:
@@ -61,12 +74,18 @@ def display_8bit(rgb: NDArray[np.floating], *, exposure: float | None = None) ->
     scale = auto_exposure(linear) if exposure is None else exposure
     flat = np.ascontiguousarray(linear).reshape(-1, 3)
     out = np.empty(flat.shape, dtype=np.uint8)
-    _display_8bit(flat, np.float32(scale), REC709_LUMINANCE, out)
+    _tone_mapped_8bit(flat, np.float32(scale), REC709_LUMINANCE, out)
     return out.reshape(linear.shape)
 
 
+#: The former name of :func:`tone_mapped_8bit`, for ``render/live_session.py`` and
+#: ``app/cli_relight.py`` until they move to the new name (other sessions edit them); not
+#: exported.
+display_8bit = tone_mapped_8bit
+
+
 @numba.njit(cache=True, parallel=True)
-def _display_8bit(
+def _tone_mapped_8bit(
     rgb: NDArray[np.float32],
     scale: np.float32,
     weights: NDArray[np.float32],

@@ -9,7 +9,7 @@ from skimage.metrics import structural_similarity
 from core.colour import srgb_to_linear
 from core.errors import InputError
 from processing.image_quality import (
-    display_8bit,
+    clipped_srgb_8bit,
     display_scale,
     image_quality,
     psnr_8bit,
@@ -40,7 +40,7 @@ def test_psnr_counts_8bit_levels() -> None:
     shifted[..., 0] += 2  # one channel of every pixel two levels up: MSE 4 / 3
     psnr = psnr_8bit(_from_8bit(shifted), _from_8bit(levels))
     assert psnr == pytest.approx(20 * math.log10(255) - 10 * math.log10(4 / 3), abs=1e-9)
-    np.testing.assert_array_equal(display_8bit(_from_8bit(levels)), levels)
+    np.testing.assert_array_equal(clipped_srgb_8bit(_from_8bit(levels)), levels)
 
 
 def test_the_mask_decides_which_pixels_count() -> None:
@@ -63,7 +63,7 @@ def test_ssim_is_wangs_on_the_8bit_images_and_falls_with_noise() -> None:
     )
     ours = ssim_8bit(noisy, reference)
     theirs = structural_similarity(
-        display_8bit(noisy), display_8bit(reference), channel_axis=2, data_range=255,
+        clipped_srgb_8bit(noisy), clipped_srgb_8bit(reference), channel_axis=2, data_range=255,
         gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
     )  # fmt: skip
     assert ours == pytest.approx(theirs, abs=1e-9) and ours < 0.99

@@ -14,7 +14,7 @@ from hypothesis.extra.numpy import arrays
 from numpy.typing import NDArray
 
 from core.errors import RigError
-from render.tonemap import KEY, auto_exposure, display_8bit, to_uint8, tone_map
+from render.tonemap import KEY, auto_exposure, to_uint8, tone_map, tone_mapped_8bit
 
 
 def _srgb(linear: float) -> float:
@@ -136,7 +136,7 @@ def test_the_one_pass_display_is_tone_map_then_to_uint8(
     rgb: NDArray[np.float32], exposure: float | None
 ) -> None:
     expected = to_uint8(tone_map(rgb, exposure=exposure))
-    np.testing.assert_array_equal(display_8bit(rgb, exposure=exposure), expected)
+    np.testing.assert_array_equal(tone_mapped_8bit(rgb, exposure=exposure), expected)
 
 
 def test_the_one_pass_display_of_a_picture_is_exact() -> None:
@@ -145,7 +145,7 @@ def test_the_one_pass_display_of_a_picture_is_exact() -> None:
     rgb = rng.lognormal(0.0, 2.5, (64, 96, 3)).astype(np.float32)
     for exposure in (0.05, 1.0, 20.0):
         expected = to_uint8(tone_map(rgb, exposure=exposure))
-        np.testing.assert_array_equal(display_8bit(rgb, exposure=exposure), expected)
+        np.testing.assert_array_equal(tone_mapped_8bit(rgb, exposure=exposure), expected)
 
 
 def test_to_uint8_rounds_and_clips() -> None:
