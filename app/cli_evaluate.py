@@ -167,6 +167,7 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
     from core.image_io import write_exr, write_srgb8
     from core.lp_format import read_lp
     from processing.image_quality import clipped_srgb_8bit, display_scale
+    from render.field_view import FieldView
     from render.light_prediction import make_predictor
     from render.rung_choice import choose_light_rung
 
@@ -206,7 +207,7 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
         if field.provenance.get("source") == "rti"
         else display_scale(field.camera_slab(camera)[:, field.visibility[camera]])
     )
-    views = _image_maker(field, camera)
+    views = FieldView.captured(field, camera).image
     if resample_to is not None:
         say_resampled((view.width, view.height), resample_to)
     for stem, values in zip(stems, predicted, strict=True):
@@ -254,18 +255,3 @@ def _entry_stem(directory: Path, name: str, lp: Path) -> Path:
             "relative paths inside the output folder"
         )
     return directory / relative
-
-
-def _image_maker(field: Any, camera: int) -> Any:
-    """Values (P, 3) of one camera to its image (H, W, 3)."""
-    import numpy as np
-
-    from core.point_spacing import point_spacing
-    from render.splat import plan_splats, splat
-
-    if field.image_shape is not None:
-        return lambda values: np.asarray(values).reshape(*field.image_shape, 3)
-    plan = plan_splats(
-        field.points, field.normals, field.cameras[camera], point_spacing(field.points)
-    )
-    return lambda values: splat(plan, values)

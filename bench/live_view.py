@@ -23,11 +23,11 @@ from core.image_io import encode_picture
 from core.point_spacing import point_spacing
 from core.sample_data import panorama_path
 from processing.panorama import read_panorama
+from render.field_view import FieldView
 from render.live_session import LIVE_MODES, LiveFrame, LiveSession
 from render.relight import blend_cameras
 from render.relight_mode import most_accurate_mode
 from render.relighter import RelightSettings
-from render.splat import plan_splats
 from sim.field import field_cameras, simulate_field
 
 __all__ = ["main", "time_session"]
@@ -89,12 +89,12 @@ def view_parts(session: LiveSession, frame: LiveFrame) -> tuple[float, float | N
     plans, blends = [], []
     for _ in range(REPEATS):
         start = time.perf_counter()
-        plan = plan_splats(field.points, field.normals, camera, spacing)
+        view = FieldView(field, camera, spacing=spacing)
         plans.append(time.perf_counter() - start)
         if isinstance(frame.relight_mode, RelightSettings):
             start = time.perf_counter()
             mode = frame.relight_mode
-            blend_cameras(field, camera, mode.view_interpolation, n=mode.n, needed=plan.visible)
+            blend_cameras(field, camera, mode.view_interpolation, n=mode.n, needed=view.needed)
             blends.append(time.perf_counter() - start)
     return 1000.0 * float(np.median(plans)), (1000.0 * float(np.median(blends)) if blends else None)
 

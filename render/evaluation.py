@@ -38,7 +38,6 @@ from numpy.typing import NDArray
 from core.errors import InputError, RigError
 from core.field_store import ReflectanceField, is_field_store
 from core.image_io import TransferChoice
-from core.point_spacing import point_spacing
 from core.progress import progress_bar
 from processing.image_quality import (
     SSIM_WINDOW,
@@ -48,6 +47,7 @@ from processing.image_quality import (
     image_quality,
 )
 from processing.rti import import_rti
+from render.field_view import FieldView
 from render.light_prediction import (
     PREDICTORS,
     LightPredictor,
@@ -56,7 +56,6 @@ from render.light_prediction import (
 )
 from render.light_splits import split_lights
 from render.rung_choice import choose_light_rung
-from render.splat import plan_splats, splat
 
 __all__ = [
     "CHOICE_SAMPLES",
@@ -528,30 +527,22 @@ class _Views:
     def __init__(self, field: ReflectanceField, mask: NDArray[np.bool_] | None) -> None:
         self.field = field
         self.mask = mask
-        self._plans: dict[int, Any] = {}
-        self._spacing: float | None = None
+        self._views: dict[int, FieldView] = {}
 
     def image(self, camera: int, values: NDArray[np.floating]) -> NDArray[np.float32]:
-        f = self.field
-        if f.image_shape is not None:
-            return np.asarray(values, dtype=np.float32).reshape(*f.image_shape, 3)
-        return splat(self._plan(camera), values)
+        return self._view(camera).image(values)
 
     def pixels(self, camera: int) -> NDArray[np.bool_]:
-        f = self.field
-        if f.image_shape is not None:
-            seen = f.visibility[camera].reshape(f.image_shape)
-            return seen if self.mask is None else seen & self.mask
-        return np.asarray(self._plan(camera).coverage, dtype=bool)
+        covered = self._view(camera).coverage
+        if self.mask is None or self.field.image_shape is None:
+            return covered
+        return covered & self.mask
 
-    def _plan(self, camera: int) -> Any:
-        if camera not in self._plans:
-            f = self.field
-            assert f.points is not None and f.normals is not None
-            if self._spacing is None:
-                self._spacing = point_spacing(f.points)
-            self._plans[camera] = plan_splats(f.points, f.normals, f.cameras[camera], self._spacing)
-        return self._plans[camera]
+    def _view(self, camera: int) -> FieldView:
+        if camera not in self._views:
+            spacing = next(iter(self._views.values())).spacing if self._views else None
+            self._views[camera] = FieldView.captured(self.field, camera, spacing=spacing)
+        return self._views[camera]
 
 
 def _test_images(

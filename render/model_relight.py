@@ -72,6 +72,7 @@ from processing.sample_models import (
     with_geometric_visibility,
 )
 from processing.sampling import SamplerName
+from render.field_view import FieldView
 from render.precomputed_lighting import (
     ALPHAS,
     BRIGHT_LIGHTS,
@@ -86,7 +87,6 @@ from render.precomputed_lighting import (
     shade_precomputed,
 )
 from render.relighter import Predictor, RelitImage
-from render.splat import SplatPlan, plan_splats, splat
 
 __all__ = [
     "LIGHTING_MODES",
@@ -511,7 +511,7 @@ class ModelRelighter:
         self._unfitted = unfitted
         self._lighting: ModelLighting | None = None
         self._environment: EnvironmentLighting | None = None
-        self._view: tuple[PinholeCamera, SplatPlan | None, NDArray[np.bool_]] | None = None
+        self._view: FieldView | None = None
         # Precomputed lighting: the pre-filtered panorama (the last one, by identity), the yaw
         # and exposure in force, the samples' transfer (per model, made on first use) and the
         # panorama as shown, adjusted only when asked for.
@@ -655,21 +655,8 @@ class ModelRelighter:
     def set_view(self, camera: PinholeCamera) -> float:
         """Plan the splats of a view (point fields); returns the seconds it took."""
         start = time.perf_counter()
-        f = self.field
-        if f.sample_kind == "pixels":
-            if not np.allclose(camera.direction, f.camera_directions[0], atol=1e-6):
-                raise InputError(
-                    f"{f.path} holds the pixels of one view; it cannot be seen from "
-                    f"({camera.azimuth_deg:g}, {camera.inclination_deg:g})"
-                )
-            # The object's pixels (a mask's others are no samples: not holes, just not shown).
-            self._view = (camera, None, f.visibility[0].copy())
-        else:
-            assert f.points is not None and f.normals is not None
-            if self._spacing is None:
-                self._spacing = point_spacing(f.points)
-            plan = plan_splats(f.points, f.normals, camera, self._spacing)
-            self._view = (camera, plan, plan.visible)
+        self._view = FieldView(self.field, camera, spacing=self._spacing)
+        self._spacing = self._view.spacing or self._spacing
         return time.perf_counter() - start
 
     def _transfer(self, name: str, fit: ParametricFit) -> SampleTransfer:
@@ -724,7 +711,8 @@ class ModelRelighter:
         """Relight the current view under the current lighting."""
         if self._lighting is None or self._view is None:
             raise InputError("set a lighting and a view before rendering")
-        camera, plan, needed = self._view
+        view = self._view
+        camera, needed = view.camera, view.needed
         start = time.perf_counter()
         if self._precomputed is not None:
             radiance = self._relight_precomputed(self._lighting, camera, needed)
@@ -734,17 +722,11 @@ class ModelRelighter:
                 sources=self._sources,
             )  # fmt: skip
         relit = time.perf_counter()
-        if plan is None:
-            assert self.field.image_shape is not None
-            height, width = self.field.image_shape
-            rgb = radiance.reshape(height, width, 3)
-            coverage = self.field.visibility[0].reshape(height, width)
-        else:
-            rgb, coverage = splat(plan, radiance), plan.coverage
+        rgb = view.image(radiance)
         done = time.perf_counter()
         return RelitImage(
             rgb=rgb,
-            coverage=coverage,
+            coverage=view.coverage,
             radiance=radiance,
             needed=needed,
             holes=needed & self._unfitted,

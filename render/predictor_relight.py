@@ -35,6 +35,7 @@ from processing.environment import EnvironmentLighting, LightingControls, light_
 from processing.measured_region import MeasuredRegion
 from processing.panorama import Panorama, VisibleEnvironments
 from processing.sample_models import SampleModels
+from render.field_view import FieldView
 from render.light_prediction import (
     PREDICTORS,
     LightPredictor,
@@ -141,6 +142,7 @@ class PredictorRelighter:
         self._environment: EnvironmentLighting | None = None
         self._lights: LightSet | None = None
         self._radiance: NDArray[np.float32] | None = None
+        self._view: FieldView | None = None
         self._outside = 0.0
 
     @property
@@ -182,28 +184,25 @@ class PredictorRelighter:
                 f"{self.field.path} holds one fixed view of {own.width}x{own.height} pixels; "
                 f"it cannot be rendered at {camera.width}x{camera.height}"
             )
+        self._view = FieldView(self.field, camera)
         return 0.0
 
     def render(self) -> RelitImage:
         """The field's view under the current lighting (predicted once per lighting)."""
         if self._lights is None:
             raise InputError("set a lighting before rendering")
+        view = self._view or FieldView(self.field, self.field.cameras[0])
         start = time.perf_counter()
         if self._radiance is None:
             radiance = environment_radiance(self.predictor, 0, self._lights, self.field.shape[2])
             # A mask's other pixels are no samples: black, as every engine leaves them.
-            self._radiance = np.where(self.field.visibility[0][:, None], radiance, 0.0).astype(
-                np.float32
-            )
-        assert self.field.image_shape is not None
-        height, width = self.field.image_shape
-        seen = self.field.visibility[0]
+            self._radiance = np.where(view.needed[:, None], radiance, 0.0).astype(np.float32)
         return RelitImage(
-            rgb=self._radiance.reshape(height, width, 3),
-            coverage=seen.reshape(height, width),
+            rgb=view.image(self._radiance),
+            coverage=view.coverage,
             radiance=self._radiance,
-            needed=seen.copy(),
-            holes=np.zeros(len(seen), dtype=bool),
+            needed=view.needed.copy(),
+            holes=np.zeros(len(view.needed), dtype=bool),
             outside_fraction=self._outside,
             seconds={"relight": time.perf_counter() - start},
         )

@@ -21,12 +21,12 @@ from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
-from core.point_spacing import point_spacing
 from processing.environment import EnvironmentLighting, LightingControls, light_environment
 from processing.interpolation import InterpolationMethod, OutsidePolicy
 from processing.panorama import Panorama, VisibleEnvironments
 from processing.sample_models import SampleModels
 from processing.sampling import SamplerName
+from render.field_view import FieldView
 from render.light_weights import (
     LightWeights,
     pixel_light_weights,
@@ -41,7 +41,6 @@ from render.relight import (
     relight_camera,
     relight_view,
 )
-from render.splat import SplatPlan, plan_splats, splat
 
 __all__ = [
     "SCHEMES",
@@ -205,7 +204,7 @@ class Relighter:
         self._visible = VisibleEnvironments(field_store.below_horizon)
         self._lighting: LightWeights | None = None
         self._environment: EnvironmentLighting | None = None
-        self._view: tuple[ViewBlend, SplatPlan | None] | None = None
+        self._view: tuple[ViewBlend, FieldView] | None = None
         self._view_field: ViewField | None = None
         # (S, P, 3): each measured camera's radiance under the lighting, filled as views need
         # them (np.zeros maps pages on first write, so unused cameras cost no memory).
@@ -273,19 +272,13 @@ class Relighter:
     def set_view(self, camera: PinholeCamera) -> float:
         """Blend the cameras for a view and plan its splats; returns the seconds it took."""
         start = time.perf_counter()
-        f = self.field
-        plan: SplatPlan | None = None
-        needed = None
-        if f.sample_kind == "points":
-            assert f.points is not None and f.normals is not None
-            if self._spacing is None:
-                self._spacing = point_spacing(f.points)
-            plan = plan_splats(f.points, f.normals, camera, self._spacing)
-            needed = plan.visible
+        view = FieldView(self.field, camera, spacing=self._spacing)
+        self._spacing = view.spacing
         blend = blend_cameras(
-            f, camera, self.settings.view_interpolation, n=self.settings.n, needed=needed
-        )
-        self._view = (blend, plan)
+            self.field, camera, self.settings.view_interpolation, n=self.settings.n,
+            needed=view.needed,
+        )  # fmt: skip
+        self._view = (blend, view)
         self._view_field = None
         self._view_changed = True
         return time.perf_counter() - start
@@ -294,7 +287,7 @@ class Relighter:
         """Relight the current view under the current lighting."""
         if self._lighting is None or self._view is None:
             raise InputError("set a lighting and a view before rendering")
-        blend, plan = self._view
+        blend, view = self._view
         start = time.perf_counter()
         if self._view_changed:
             radiance = self._blend_camera_radiance(blend)
@@ -304,19 +297,13 @@ class Relighter:
                 self._view_field = blend_field(self.field, blend)
             radiance = relight_view(self._view_field, self._lighting)
         relit = time.perf_counter()
-        if plan is None:
-            assert self.field.image_shape is not None
-            height, width = self.field.image_shape
-            rgb = radiance.reshape(height, width, 3)
-            coverage = (blend.weights.sum(axis=0) > 0).reshape(height, width)
-        else:
-            rgb, coverage = splat(plan, radiance), plan.coverage
+        rgb = view.image(radiance)
         done = time.perf_counter()
         return RelitImage(
             rgb=rgb,
-            coverage=coverage,
+            coverage=view.coverage,
             radiance=radiance,
-            needed=np.ones(len(radiance), dtype=bool) if plan is None else plan.visible,
+            needed=view.needed,
             holes=blend.holes,
             outside_fraction=self._lighting.outside_fraction,
             seconds={"relight": relit - start, "splat": done - relit},
