@@ -233,13 +233,13 @@ def _write_pyvista_picture(args: argparse.Namespace, field: Any, camera: Any, im
 
     from core.image_io import write_srgb8
     from core.point_spacing import point_spacing
-    from render.tonemap import auto_exposure, display_8bit
+    from render.tonemap import auto_exposure, tone_mapped_8bit
     from render.viewer import pyvista_picture
 
     if field.sample_kind != "points" or args.output.suffix.lower() != ".png":
         raise RigError("--renderer pyvista draws the points of a point field into a .png")
     exposure = auto_exposure(image.rgb[image.coverage]) if image.coverage.any() else 1.0
-    colours = display_8bit(image.radiance, exposure=exposure)
+    colours = tone_mapped_8bit(image.radiance, exposure=exposure)
     spacing = point_spacing(field.points)
     write_srgb8(
         args.output,

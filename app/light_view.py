@@ -169,7 +169,7 @@ class ChosenLight:
 
         from core.camera_model import camera_to_rig
         from core.image_io import encode_picture
-        from processing.image_quality import display_8bit, display_scale
+        from processing.image_quality import clipped_srgb_8bit, display_scale
         from render.field_view import FieldView
         from render.rung_choice import choose_light_rung
 
@@ -201,5 +201,5 @@ class ChosenLight:
         direction = camera_to_rig(np.array([light], dtype=np.float64), field.cameras[0])
         values = self._predictor.predict(0, direction)[0]
         image = FieldView.captured(field, 0).image(values)
-        _, png = encode_picture(display_8bit(image, self._scale), ".png")
+        _, png = encode_picture(clipped_srgb_8bit(image, self._scale), ".png")
         return png

@@ -39,7 +39,7 @@ from render.overlay import sample_overlay
 from render.relight_mode import ModeChoice, RelightEngine, RelightMode
 from render.relighter import RelightSettings, RelitImage
 from render.relighting import ChosenMode, relighting_warnings
-from render.tonemap import auto_exposure, display_8bit
+from render.tonemap import auto_exposure, tone_mapped_8bit
 
 __all__ = [
     "LIVE_MODES",
@@ -533,7 +533,7 @@ class LiveSession:
             if lights is not None and lights.labels is not None and lights.k <= 4096:
                 full = sample_overlay(rgb, lights, exposure=exposure)
             else:
-                full = display_8bit(rgb, exposure=exposure)
+                full = tone_mapped_8bit(rgb, exposure=exposure)
             height = min(PANORAMA_PICTURE_HEIGHT, full.shape[0])
             picture = cv2.resize(full, (2 * height, height), interpolation=cv2.INTER_AREA)
             self._panorama_pictures = {lighting: np.ascontiguousarray(picture)}

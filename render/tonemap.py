@@ -78,12 +78,6 @@ def tone_mapped_8bit(
     return out.reshape(linear.shape)
 
 
-#: The former name of :func:`tone_mapped_8bit`, for ``render/live_session.py`` and
-#: ``app/cli_relight.py`` until they move to the new name (other sessions edit them); not
-#: exported.
-display_8bit = tone_mapped_8bit
-
-
 @numba.njit(cache=True, parallel=True)
 def _tone_mapped_8bit(
     rgb: NDArray[np.float32],
