@@ -275,7 +275,7 @@ def _run_sim_field(args: argparse.Namespace) -> int:
         height=args.size[1],
     )
     if args.renderer == "mitsuba":
-        from sim.mitsuba_world import load_world, render_world_field
+        from sim.world.mitsuba import load_world, render_world_field
 
         render_world_field(
             args.output, load_world(args.scene), lights=args.lights, cameras=cameras,
@@ -303,7 +303,7 @@ def _run_sim_field(args: argparse.Namespace) -> int:
 
 def _run_sim_rti(args: argparse.Namespace) -> int:
     from bench.held_out import make_world_rti
-    from sim.mitsuba_world import load_world
+    from sim.world.mitsuba import load_world
 
     out: Path = args.output
     if out.exists() and any(out.iterdir()):
@@ -329,7 +329,7 @@ def _run_sim_render(args: argparse.Namespace) -> int:
     if not args.output.suffix.lower() == ".exr":
         raise RigError(f"{args.output}: the ground truth is written as OpenEXR (.exr)")
     if args.renderer == "mitsuba":
-        from sim.mitsuba_world import load_world
+        from sim.world.mitsuba import load_world
 
         world = load_world(args.scene)  # a bad world file is refused before the panorama
     else:
@@ -341,7 +341,7 @@ def _run_sim_render(args: argparse.Namespace) -> int:
         args.view[0], args.view[1], args.distance, args.fov, args.size[0], args.size[1]
     )
     if args.renderer == "mitsuba":
-        from sim.mitsuba_world import render_world_environment
+        from sim.world.mitsuba import render_world_environment
 
         rgb, alpha = render_world_environment(
             world, panorama.rgb, camera, spp=args.spp, max_depth=args.max_depth

@@ -2,10 +2,10 @@
 
 The advisor (:mod:`render.advisor`) predicts each configuration's error from the field alone.
 :mod:`bench.advisor` checks it against the simulator, whose material is the models' own; here
-the field is path-traced by Mitsuba 3 (:mod:`sim.mitsuba_world`: interreflections, coloured
+the field is path-traced by Mitsuba 3 (:mod:`sim.world.mitsuba`: interreflections, coloured
 Fresnel, clear coats), and so is the truth: the world under the panorama, seen by a captured
 camera and by a view halfway between two cameras, each sample's radiance read from the image as
-the field's own slabs are (:func:`sim.world_visibility.sample_view`). Every candidate relights
+the field's own slabs are (:func:`sim.world.visibility.sample_view`). Every candidate relights
 the field at both views and is scored per sample (relative RMSE over the samples both show),
 the quantity the advisor predicts.
 
@@ -37,11 +37,11 @@ from processing.sample_model_store import models_for_field
 from processing.sample_models import PARAMETRIC_MODELS
 from render.relighter import RelitImage
 from sim.field import field_cameras
-from sim.mitsuba_world import render_world_field
-from sim.world_files import WORLDS, World, load_world
-from sim.world_render import WorldRenderer, render_environment_image
-from sim.world_samples import world_samples
-from sim.world_visibility import sample_view
+from sim.world.files import WORLDS, World, load_world
+from sim.world.mitsuba import render_world_field
+from sim.world.render import WorldRenderer, render_environment_image
+from sim.world.samples import world_samples
+from sim.world.visibility import sample_view
 
 __all__ = [
     "PANORAMA_HEIGHT",

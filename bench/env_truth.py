@@ -2,9 +2,9 @@
 
 For each scene on a base (``sim/worlds/matte-still-life``, ``plastic-gold``, ``glazed-bowl``)
 and each dome (49 and 100 Fibonacci lights above the horizon), an overhead RTI capture is
-path-traced (:func:`sim.world_rti.render_world_rti`) and written as the project's RTI import
+path-traced (:func:`sim.world.rti.render_world_rti`) and written as the project's RTI import
 reads it (16-bit linear TIFF, ``fit.lp`` in the camera frame, ``fit.mask.png``). The same scene
-is path-traced under each panorama (:func:`sim.mitsuba_world.render_world_environment`): the
+is path-traced under each panorama (:func:`sim.world.mitsuba.render_world_environment`): the
 truth. Each method predicts that truth from the capture:
 
 ``light-stage sum (full sphere)``
@@ -56,10 +56,10 @@ from core.image_io import read_pixels, write_exr
 from core.sample_data import panorama_path
 from processing.panorama import downsample_panorama, read_panorama
 from processing.rti import write_rti_capture
-from sim.mitsuba_world import DEFAULT_MAX_DEPTH, load_world, render_world_environment
 from sim.skies import procedural_sky
-from sim.world_render import WorldRenderer
-from sim.world_rti import overhead_camera, render_world_rti
+from sim.world.mitsuba import DEFAULT_MAX_DEPTH, load_world, render_world_environment
+from sim.world.render import WorldRenderer
+from sim.world.rti import overhead_camera, render_world_rti
 
 __all__ = [
     "CLI_METHODS",

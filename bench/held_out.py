@@ -7,7 +7,7 @@ judged where it is the truth):
     the bundled RTI capture (a bronze lion, 240 lights, 8-bit JPEG): nobody's model;
 ``path-traced``
     fields rendered by Mitsuba 3's path tracer of materials outside every fitted family
-    (:mod:`sim.mitsuba_world`), when the study is given them;
+    (:mod:`sim.world.mitsuba`), when the study is given them;
 ``own family``
     the project's simulator, whose material *is* the lambert+ggx model: a figure only this
     kind supports says nothing about real objects, and the report says so.
@@ -40,8 +40,8 @@ from render.evaluation import Evaluation, evaluate, test_field_from_lp
 from render.light_prediction import PREDICTORS
 from render.light_splits import split_lights
 from sim.field import field_cameras, simulate_field
-from sim.mitsuba_world import DEFAULT_MAX_DEPTH, load_world, render_world_field
-from sim.world_rti import render_world_rti
+from sim.world.mitsuba import DEFAULT_MAX_DEPTH, load_world, render_world_field
+from sim.world.rti import render_world_rti
 
 __all__ = [
     "RTI_SPEC",
@@ -139,7 +139,7 @@ def world_fields(
     Parameters
     ----------
     fields_dir : Path, where the stores are kept between runs
-    names : bundled worlds (:data:`sim.mitsuba_world.WORLDS`)
+    names : bundled worlds (:data:`sim.world.mitsuba.WORLDS`)
     spec : WorldSpec
     progress : bool, progress bars while rendering
 

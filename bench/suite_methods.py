@@ -180,7 +180,7 @@ class SuiteConfig:
     held_out_methods : the methods of the held-out-light study (:mod:`bench.held_out`);
         empty to skip it
     held_out_worlds, world_field : the path-traced worlds of that study (Mitsuba 3,
-        :mod:`sim.mitsuba_world`) and their fields: (cameras, lights, image side, samples per
+        :mod:`sim.world.mitsuba`) and their fields: (cameras, lights, image side, samples per
         pixel, points)
     rti_worlds, rti_capture : the worlds of that study captured as RTI domes: (fit lights,
         test lights, width, height, samples per pixel)

@@ -9,7 +9,7 @@ import numpy as np
 from core.errors import InputError
 from sim.materials import Material
 from sim.scenes import MAX_POINTS, SurfaceSamples, uniform_material
-from sim.world_mesh import read_mesh_file, sample_surface
+from sim.world.mesh import read_mesh_file, sample_surface
 
 __all__ = ["sample_mesh"]
 
@@ -19,7 +19,7 @@ def sample_mesh(
 ) -> SurfaceSamples:
     """Sample ``points`` surface points uniformly by area from a triangle mesh file.
 
-    The mesh is read and sampled as a path-traced world's (:mod:`sim.world_mesh`, the one home
+    The mesh is read and sampled as a path-traced world's (:mod:`sim.world.mesh`, the one home
     of meshes): normals are the file's vertex normals (else area-weighted face normals)
     interpolated across each triangle.
 

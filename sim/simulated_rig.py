@@ -18,10 +18,10 @@ from rig.config_cameras import SimulatedCameraConfig
 from rig.devices import LightState
 from rig.hardware import Rig, servo_axis
 from rig.pose import RigPose
-from sim.dynamixel_emulator import ServoChainEmulator
-from sim.dynamixel_faults import FaultConfig
-from sim.dynamixel_servo import ServoSpec
-from sim.grbl_emulator import GrblEmulator, GrblFaults
+from sim.dynamixel.emulator import ServoChainEmulator
+from sim.dynamixel.faults import FaultConfig
+from sim.dynamixel.servo import ServoSpec
+from sim.grbl.emulator import GrblEmulator, GrblFaults
 from sim.scenes import get_scene
 from sim.simulated_camera import SimulatedCamera
 

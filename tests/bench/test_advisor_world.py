@@ -13,7 +13,7 @@ from core.field_store import ReflectanceField
 from core.sample_data import panorama_path
 from processing.panorama import downsample_panorama, panorama_from_array, read_panorama
 from sim.field import field_cameras, simulate_field
-from sim.mitsuba_world import render_world_field
+from sim.world.mitsuba import render_world_field
 
 
 def test_the_truth_is_the_world_seen_like_its_field(tmp_path: Path) -> None:

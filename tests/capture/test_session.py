@@ -25,8 +25,8 @@ from rig.config import RigConfig
 from rig.config_cameras import CameraFaultConfig
 from rig.hardware import Rig
 from rig.safety import ForbiddenZone, pose_violation
-from sim.dynamixel_faults import FaultConfig
-from sim.grbl_emulator import GrblFaults
+from sim.dynamixel.faults import FaultConfig
+from sim.grbl.emulator import GrblFaults
 from sim.simulated_rig import SimulatedRig, simulated_capture_config
 
 SIM = ["--sim", "--cameras", "2", "--lights", "5", "--size", "32", "--points", "1500",

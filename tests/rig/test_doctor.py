@@ -13,8 +13,8 @@ from core.errors import DeviceError, RigError
 from rig.config import simulated_config
 from rig.doctor import NUDGE_DEG, DoctorCheck, format_checks, run_doctor
 from rig.pose import RigPose
-from sim.dynamixel_faults import FaultConfig
-from sim.grbl_emulator import GrblFaults
+from sim.dynamixel.faults import FaultConfig
+from sim.grbl.emulator import GrblFaults
 from sim.simulated_rig import SimulatedRig
 
 ROLES = ("camera_azimuth", "camera_inclination", "light_azimuth", "light_inclination")

@@ -11,11 +11,11 @@ import pytest
 
 from core.errors import ConfigError, DeviceError, ProtocolError, SafetyError
 from rig.dynamixel import DynamixelChain, ServoAxisConfig, ServoHardwareError
-from sim.dynamixel_emulator import ServoChainEmulator
-from sim.dynamixel_faults import FaultConfig
-from sim.dynamixel_motion import TrapezoidMove, acceleration_ticks_per_s2, velocity_ticks_per_s
-from sim.dynamixel_protocol import Instruction, Packet
-from sim.dynamixel_servo import ServoSpec
+from sim.dynamixel.emulator import ServoChainEmulator
+from sim.dynamixel.faults import FaultConfig
+from sim.dynamixel.motion import TrapezoidMove, acceleration_ticks_per_s2, velocity_ticks_per_s
+from sim.dynamixel.protocol import Instruction, Packet
+from sim.dynamixel.servo import ServoSpec
 
 AZIMUTH = ServoAxisConfig(
     id=1,

@@ -29,8 +29,8 @@ from rig.grbl_protocol import (
     parse_status,
     validate_command,
 )
-from sim.grbl_emulator import FaultRule, GrblEmulator, GrblFaults, LightState
-from sim.grbl_motion import Profile
+from sim.grbl.emulator import FaultRule, GrblEmulator, GrblFaults, LightState
+from sim.grbl.motion import Profile
 
 FAST = {110: 36000.0, 111: 36000.0, 112: 36000.0, 120: 20000.0, 121: 20000.0, 122: 20000.0}
 AXES = GantryAxes(GantryAxisConfig("X", -180.0, 180.0), GantryAxisConfig("Y", 0.0, 90.0))

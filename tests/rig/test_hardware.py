@@ -11,8 +11,8 @@ from core.errors import DeviceError, SafetyError
 from rig.config import simulated_config
 from rig.hardware import LightGantry, servo_axis
 from rig.pose import RigPose
-from sim.dynamixel_faults import FaultConfig
-from sim.grbl_emulator import GrblEmulator, GrblFaults
+from sim.dynamixel.faults import FaultConfig
+from sim.grbl.emulator import GrblEmulator, GrblFaults
 from sim.simulated_rig import SimulatedRig
 
 

@@ -26,10 +26,10 @@ from dynamixel_sdk import (
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sim.dynamixel_emulator import ServoChainEmulator
-from sim.dynamixel_faults import FaultConfig
-from sim.dynamixel_motion import TrapezoidMove, acceleration_ticks_per_s2, velocity_ticks_per_s
-from sim.dynamixel_protocol import (
+from sim.dynamixel.emulator import ServoChainEmulator
+from sim.dynamixel.faults import FaultConfig
+from sim.dynamixel.motion import TrapezoidMove, acceleration_ticks_per_s2, velocity_ticks_per_s
+from sim.dynamixel.protocol import (
     Instruction,
     PacketParser,
     ResultError,
@@ -39,7 +39,7 @@ from sim.dynamixel_protocol import (
     stuff,
     unstuff,
 )
-from sim.dynamixel_servo import ServoSpec
+from sim.dynamixel.servo import ServoSpec
 
 PH = PacketHandler(2.0)
 

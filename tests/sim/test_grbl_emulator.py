@@ -12,9 +12,9 @@ from typing import Any
 import pytest
 import serial
 
-from sim.grbl_emulator import FaultRule, GrblEmulator, GrblFaults, LightState
-from sim.grbl_lines import LineAssembler
-from sim.grbl_motion import Profile
+from sim.grbl.emulator import FaultRule, GrblEmulator, GrblFaults, LightState
+from sim.grbl.lines import LineAssembler
+from sim.grbl.motion import Profile
 
 FAST = {110: 36000.0, 111: 36000.0, 112: 36000.0, 120: 20000.0, 121: 20000.0, 122: 20000.0}
 BANNER = b"Grbl 1.1h ['$' for help]\r\n"

@@ -20,7 +20,8 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from processing.panorama import downsample_panorama, read_panorama
 from sim.mitsuba_reference import load_mitsuba, render_reference
-from sim.mitsuba_world import (
+from sim.world.files import WORLDS_FOLDER
+from sim.world.mitsuba import (
     WORLDS,
     World,
     load_world,
@@ -29,10 +30,9 @@ from sim.mitsuba_world import (
     render_world_field,
     world_samples,
 )
-from sim.world_files import WORLDS_FOLDER
-from sim.world_render import WorldRenderer
-from sim.world_textures import texture_image
-from sim.world_visibility import sample_view
+from sim.world.render import WorldRenderer
+from sim.world.textures import texture_image
+from sim.world.visibility import sample_view
 
 ALBEDO = (0.75, 0.60, 0.45)
 SPHERE = f"""

@@ -12,7 +12,7 @@ from __future__ import annotations
 import random
 from dataclasses import dataclass
 
-from sim.dynamixel_protocol import Packet
+from sim.dynamixel.protocol import Packet
 
 __all__ = ["FaultConfig", "FaultInjector"]
 

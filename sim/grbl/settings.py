@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from sim.grbl_words import NUMBER, Refused
+from sim.grbl.words import NUMBER, Refused
 
 __all__ = [
     "DEFAULT_SETTINGS",

@@ -9,13 +9,13 @@ A world file holds ``name``, ``description``, a ``[shape]`` table and a ``[mater
     type = "bowl"          # torus-knot | bowl | relief | sphere | mesh
     radius = 0.85          # any parameter of the shape; the others keep their defaults
 
-    [material]             # a Mitsuba BSDF dictionary (sim.world_materials)
+    [material]             # a Mitsuba BSDF dictionary (sim.world.materials)
     type = "roughconductor"
     material = "Cu"
     distribution = "ggx"
     alpha = 0.3
 
-Shapes and their parameters are those of :mod:`sim.world_shapes` (``type = "mesh"`` takes
+Shapes and their parameters are those of :mod:`sim.world.shapes` (``type = "mesh"`` takes
 ``file``, a PLY path relative to the world file, and ``scale``); any shape also takes
 ``position = [x, y, z]``, where its centre goes (default the origin). Every object must fit
 inside the unit sphere about the origin (the rig's cameras sit at distance ~4 with a 40-degree
@@ -59,9 +59,9 @@ import numpy as np
 
 from core.errors import InputError
 from sim.mitsuba_reference import DEFAULT_VARIANT, load_mitsuba
-from sim.world_materials import instantiate_bsdf, material_dict, material_files, needs_uv
-from sim.world_mesh import TriangleMesh, mitsuba_mesh, read_mesh_file
-from sim.world_shapes import (
+from sim.world.materials import instantiate_bsdf, material_dict, material_files, needs_uv
+from sim.world.mesh import TriangleMesh, mitsuba_mesh, read_mesh_file
+from sim.world.shapes import (
     bowl_mesh,
     cylinder_mesh,
     join_meshes,

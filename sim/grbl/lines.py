@@ -3,7 +3,7 @@
 As ``protocol.c`` reads them: whitespace and control characters dropped, ``()`` and ``;``
 comments removed, letters upper-cased, ``/`` (block delete) ignored, and a line longer than the
 80-byte line buffer flagged as overflowed (GRBL answers it ``error:11``). Real-time bytes never
-reach this filter: the emulator (:mod:`sim.grbl_emulator`) picks them off first.
+reach this filter: the emulator (:mod:`sim.grbl.emulator`) picks them off first.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ Each block runs a trapezoidal profile along its straight line, with GRBL's per-a
 junction speed between blocks: a simplification). The planner holds :data:`PLANNER_BLOCKS`
 blocks. Positions are in units (mm); GRBL counts steps, so a new steps/mm setting rescales the
 rest position (:meth:`Planner.rescale`). Nothing here knows the machine's states:
-:class:`sim.grbl_machine.GrblMachine` decides when a block starts, holds or is dropped.
+:class:`sim.grbl.machine.GrblMachine` decides when a block starts, holds or is dropped.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ The simulator's own worlds (:mod:`sim.scenes`) are built from the model family t
 models fit (diffuse plus one GGX lobe, direct light only), so they cannot say how those models
 fare on anything else. A Mitsuba world is a triangle mesh with any Mitsuba BSDF (principled with
 textured roughness and metallic, coated plastics, anisotropic and coloured metals, layered
-coats, non-Lambertian mattes), described in a TOML file (:mod:`sim.world_files`, bundled ones
+coats, non-Lambertian mattes), described in a TOML file (:mod:`sim.world.files`, bundled ones
 in ``sim/worlds/``) and rendered by Mitsuba's path tracer with interreflections. From it come
 
 - :func:`render_world_field`: a reflectance field in the store of :mod:`core.field_store`,
@@ -15,7 +15,7 @@ in ``sim/worlds/``) and rendered by Mitsuba's path tracer with interreflections.
 
 How a field is made (``docs/world.md`` has the measurements): the scene is loaded once per
 camera optics; per camera, a geometry pass (one ray through each pixel centre) tells which
-samples the camera sees (:mod:`sim.world_visibility`); per light, the directional emitter is
+samples the camera sees (:mod:`sim.world.visibility`); per light, the directional emitter is
 turned through ``mi.traverse`` and the path tracer renders the image, from which each seen
 sample reads its pixel's radiance. A light below a sample's horizon, or blocked, gives whatever
 the path tracer gives (interreflected light, usually): this is a physical world, not the model.
@@ -40,10 +40,10 @@ from core.errors import InputError
 from core.field_store import FieldStoreWriter, is_field_store
 from core.progress import progress_bar
 from sim.mitsuba_reference import DEFAULT_VARIANT, load_mitsuba
-from sim.world_files import WORLDS, World, load_world
-from sim.world_render import SAMPLER, WorldImage, WorldRenderer, render_environment_image
-from sim.world_samples import WorldSamples, world_samples
-from sim.world_visibility import SampleView, sample_view
+from sim.world.files import WORLDS, World, load_world
+from sim.world.render import SAMPLER, WorldImage, WorldRenderer, render_environment_image
+from sim.world.samples import WorldSamples, world_samples
+from sim.world.visibility import SampleView, sample_view
 
 __all__ = [
     "DEFAULT_ENVIRONMENT_SPP",

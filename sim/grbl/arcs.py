@@ -14,8 +14,8 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
-from sim.grbl_motion import Vec
-from sim.grbl_words import Refused
+from sim.grbl.motion import Vec
+from sim.grbl.words import Refused
 
 __all__ = ["PLANES", "arc_offset", "arc_points"]
 

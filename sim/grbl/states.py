@@ -1,10 +1,10 @@
 """GRBL 1.1's machine states and the events that change them: motion, holds, alarms, resets.
 
 The part of the machine that real-time commands and inputs act on, below the lines
-(:class:`sim.grbl_machine.GrblMachine` adds those): the planner's blocks running on a clock the
+(:class:`sim.grbl.machine.GrblMachine` adds those): the planner's blocks running on a clock the
 caller passes, feed hold and cycle start, alarms, soft resets and their banner, the limit
-switches (:mod:`sim.grbl_limits`), the spindle and coolant outputs (:mod:`sim.grbl_spindle`) and
-the status report (:mod:`sim.grbl_report`). Output lines go through ``emit(text, kind, source)``.
+switches (:mod:`sim.grbl.limits`), the spindle and coolant outputs (:mod:`sim.grbl.spindle`) and
+the status report (:mod:`sim.grbl.report`). Output lines go through ``emit(text, kind, source)``.
 
 As GRBL 1.1h (``protocol.c``, ``limits.c``, ``motion_control.c``, ``report.c``):
 
@@ -26,13 +26,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 
-from sim.grbl_gcode import ModalState
-from sim.grbl_limits import LimitPins
-from sim.grbl_motion import Block, Planner, Vec
-from sim.grbl_report import StatusReporter
-from sim.grbl_settings import settings_with
-from sim.grbl_spindle import SpindleOutput
-from sim.grbl_steps import Emit, LineSteps
+from sim.grbl.gcode import ModalState
+from sim.grbl.limits import LimitPins
+from sim.grbl.motion import Block, Planner, Vec
+from sim.grbl.report import StatusReporter
+from sim.grbl.settings import settings_with
+from sim.grbl.spindle import SpindleOutput
+from sim.grbl.steps import Emit, LineSteps
 
 __all__ = ["BANNER", "MachineStates"]
 
@@ -46,7 +46,7 @@ class MachineStates:
 
     Parameters
     ----------
-    settings : overrides of :data:`sim.grbl_settings.DEFAULT_SETTINGS`
+    settings : overrides of :data:`sim.grbl.settings.DEFAULT_SETTINGS`
     emit : ``emit(text, kind, source)`` receives every output line
     hard_limit_after_moves : raise ALARM:1 half-way through this motion block (1-based count
         since start; fault injection), or None

@@ -1,14 +1,14 @@
 """GRBL 1.1's lines: ``$`` commands, G-code blocks, startup lines, homing and sleep.
 
-No I/O and no clock of its own: the emulator (:mod:`sim.grbl_emulator`) passes the time of every
+No I/O and no clock of its own: the emulator (:mod:`sim.grbl.emulator`) passes the time of every
 event, and the machine writes its output lines through an ``emit(text, kind, source)`` callback
 (``kind`` is ``"response"`` for ``ok``/``error:N``, ``"status"`` or ``"push"``; ``source`` the
 line it answers), so fault injection can act on them. Below the lines are the states, motion,
-alarms and resets (:mod:`sim.grbl_states`); its other parts: the line filter
-(:mod:`sim.grbl_lines`), the G-code subset (:mod:`sim.grbl_gcode`, arcs in
-:mod:`sim.grbl_arcs`), the EEPROM settings and startup lines (:mod:`sim.grbl_settings`), motion
-(:mod:`sim.grbl_motion`), a line's steps (:mod:`sim.grbl_steps`) and status reports
-(:mod:`sim.grbl_report`).
+alarms and resets (:mod:`sim.grbl.states`); its other parts: the line filter
+(:mod:`sim.grbl.lines`), the G-code subset (:mod:`sim.grbl.gcode`, arcs in
+:mod:`sim.grbl.arcs`), the EEPROM settings and startup lines (:mod:`sim.grbl.settings`), motion
+(:mod:`sim.grbl.motion`), a line's steps (:mod:`sim.grbl.steps`) and status reports
+(:mod:`sim.grbl.report`).
 
 Behaviour follows GRBL 1.1h (``protocol.c``, ``system.c``, ``gcode.c``, ``limits.c``):
 
@@ -16,7 +16,7 @@ Behaviour follows GRBL 1.1h (``protocol.c``, ``system.c``, ``gcode.c``, ``limits
   and line processing stops while it is full; G4, and spindle and coolant changes, first wait
   for the planner to empty (GRBL's buffer synchronisation), so their ``ok`` comes only then;
 - ``$20=1`` soft limits (machine space ``-$13x .. 0``) on a target: feed hold, then ``ALARM:2``,
-  the critical lock-up (see :mod:`sim.grbl_states`); after the reset the offending line gets
+  the critical lock-up (see :mod:`sim.grbl.states`); after the reset the offending line gets
   its ``ok``, then the banner and ``[MSG:'$H'|'$X' to unlock]``;
 - in Alarm every G-code line gets ``error:9``; ``$X`` or ``$H`` clear it; power-up with ``$22=1``
   starts in Alarm; ``$H`` runs the startup lines before its ``ok``, ``$X`` does not;
@@ -38,7 +38,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from sim.grbl_gcode import (
+from sim.grbl.gcode import (
     Action,
     CoolantChange,
     Dwell,
@@ -48,18 +48,18 @@ from sim.grbl_gcode import (
     interpret,
     modal_report,
 )
-from sim.grbl_motion import EPS, PLANNER_BLOCKS, Vec, within_travel
-from sim.grbl_report import ngc_parameter_lines
-from sim.grbl_settings import (
+from sim.grbl.motion import EPS, PLANNER_BLOCKS, Vec, within_travel
+from sim.grbl.report import ngc_parameter_lines
+from sim.grbl.settings import (
     N_STARTUP_LINES,
     setting_lines,
     startup_line_command,
     startup_listing,
     store_setting,
 )
-from sim.grbl_states import BANNER, MachineStates
-from sim.grbl_steps import Emit, Step
-from sim.grbl_words import Refused
+from sim.grbl.states import BANNER, MachineStates
+from sim.grbl.steps import Emit, Step
+from sim.grbl.words import Refused
 
 __all__ = ["BANNER", "GrblMachine"]
 
@@ -71,7 +71,7 @@ class GrblMachine(MachineStates):
 
     Parameters
     ----------
-    settings : overrides of :data:`sim.grbl_settings.DEFAULT_SETTINGS`
+    settings : overrides of :data:`sim.grbl.settings.DEFAULT_SETTINGS`
     emit : ``emit(text, kind, source)`` receives every output line
     hard_limit_after_moves : raise ALARM:1 half-way through this motion block (1-based count
         since start; fault injection), or None

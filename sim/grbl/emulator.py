@@ -15,7 +15,7 @@ arriving while it is full are lost, as on the hardware. The buffer only fills wh
 read it (planner full, waiting for a G4/M-code synchronisation, homing, after an alarm, asleep),
 so a host that counts characters never loses any and one that does not may; a reset (a soft
 one, or GRBL's own after a failed homing) empties it and drops a pending status request. The
-machine itself (parser, motion, states) is :class:`sim.grbl_machine.GrblMachine`.
+machine itself (parser, motion, states) is :class:`sim.grbl.machine.GrblMachine`.
 
 Faults (:class:`GrblFaults`) are deterministic for a seed: each kind draws from its own random
 stream, so one kind does not shift another. Limit switches are pressed and released with
@@ -36,8 +36,8 @@ from dataclasses import dataclass
 from types import TracebackType
 
 from rig.grbl import GantryAxes, GantryAxisConfig
-from sim.grbl_lines import LineAssembler
-from sim.grbl_machine import GrblMachine
+from sim.grbl.lines import LineAssembler
+from sim.grbl.machine import GrblMachine
 
 __all__ = ["FaultRule", "GrblEmulator", "GrblFaults", "LightState"]
 
@@ -91,7 +91,7 @@ class LightState:
 
     ``intensity`` is the spindle PWM duty (the output speed / $30, in [0, 1]) while the PWM is
     on, else 1.0 when the flood coolant pin is on, else 0.0. In laser mode (``$32=1``) the PWM
-    follows the motion (see :mod:`sim.grbl_spindle`).
+    follows the motion (see :mod:`sim.grbl.spindle`).
     """
 
     on: bool

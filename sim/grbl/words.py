@@ -1,7 +1,7 @@
 """GRBL 1.1's words: how it reads a number, splits a line into words, and refuses a line.
 
-Shared by the G-code parser (:mod:`sim.grbl_gcode`), its arcs (:mod:`sim.grbl_arcs`) and the
-``$`` settings (:mod:`sim.grbl_settings`): every check there ends in :class:`Refused`, which the
+Shared by the G-code parser (:mod:`sim.grbl.gcode`), its arcs (:mod:`sim.grbl.arcs`) and the
+``$`` settings (:mod:`sim.grbl.settings`): every check there ends in :class:`Refused`, which the
 machine answers ``error:N``.
 """
 

@@ -1,6 +1,6 @@
 """RTI-style captures of a path-traced world: one overhead view, a dome of directional lights.
 
-The pixel-field counterpart of :func:`sim.mitsuba_world.render_world_field`: what an RTI dome
+The pixel-field counterpart of :func:`sim.world.mitsuba.render_world_field`: what an RTI dome
 records of a flat or relief object (a camera straight above, one photograph per light), from
 the same Mitsuba worlds, so held-out-light evaluation can be run the way the RTI literature
 runs it (e.g. 49 lights to fit, 20 others to predict). Writing the images and ``.lp`` files is
@@ -18,8 +18,8 @@ from core.camera_model import PinholeCamera
 from core.directions import hemisphere_layout
 from core.errors import InputError
 from core.progress import progress_bar
-from sim.mitsuba_world import DEFAULT_FIELD_SPP, DEFAULT_MAX_DEPTH, World, load_world
-from sim.world_render import WorldRenderer
+from sim.world.mitsuba import DEFAULT_FIELD_SPP, DEFAULT_MAX_DEPTH, World, load_world
+from sim.world.render import WorldRenderer
 
 __all__ = ["RtiCapture", "overhead_camera", "render_world_rti"]
 

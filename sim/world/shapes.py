@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.errors import InputError
-from sim.world_mesh import TriangleMesh, oriented_faces, unit_normals, vertex_normals
+from sim.world.mesh import TriangleMesh, oriented_faces, unit_normals, vertex_normals
 
 __all__ = [
     "bowl_mesh",

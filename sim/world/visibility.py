@@ -38,8 +38,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.camera_model import PinholeCamera
-from sim.world_render import PixelGeometry, WorldImage
-from sim.world_samples import WorldSamples
+from sim.world.render import PixelGeometry, WorldImage
+from sim.world.samples import WorldSamples
 
 __all__ = ["DEPTH_TOLERANCE", "SampleView", "sample_view"]
 

@@ -4,7 +4,7 @@ Every world is one triangle mesh with unit vertex normals (smooth shading) and, 
 has a natural parameterisation, texture coordinates. The same arrays go to Mitsuba (as an
 ``mi.Mesh``, :func:`mitsuba_mesh`) and to the field's surface samples (:func:`sample_surface`),
 so the samples lie on the very triangles Mitsuba renders, with the normals it shades with.
-Meshes come from the built-in shapes (:mod:`sim.world_shapes`) or from PLY files
+Meshes come from the built-in shapes (:mod:`sim.world.shapes`) or from PLY files
 (:func:`read_mesh_file`).
 """
 

@@ -13,7 +13,7 @@ when the spindle or coolant is on.
 
 from __future__ import annotations
 
-from sim.grbl_motion import Vec
+from sim.grbl.motion import Vec
 
 __all__ = ["StatusReporter", "axes_text", "ngc_parameter_lines"]
 

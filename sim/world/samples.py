@@ -10,8 +10,8 @@ from numpy.typing import NDArray
 from core.errors import InputError
 from core.point_spacing import point_spacing
 from sim.scenes import MAX_POINTS
-from sim.world_files import World
-from sim.world_mesh import sample_surface
+from sim.world.files import World
+from sim.world.mesh import sample_surface
 
 __all__ = ["WorldSamples", "world_samples"]
 

@@ -1,7 +1,7 @@
 """An emulated X-series servo's motion: its velocity and acceleration units and trapezoidal moves.
 
 :class:`TrapezoidMove` is one point-to-point move against a monotonic clock, as the servo's
-Profile Velocity and Profile Acceleration shape it; the servo (:mod:`sim.dynamixel_servo`)
+Profile Velocity and Profile Acceleration shape it; the servo (:mod:`sim.dynamixel.servo`)
 starts, stops and reads them.
 """
 

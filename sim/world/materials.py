@@ -5,7 +5,7 @@ sub-tables with their own ``type``), with three conveniences TOML needs:
 
 - a list of three numbers is an RGB value (``{"type": "rgb", "value": [...]}``);
 - ``{ texture = "checker" | "noise" | "stripes", low, high, scale, resolution, seed }`` is a
-  procedural texture (:mod:`sim.world_textures`), given to Mitsuba as an in-memory float
+  procedural texture (:mod:`sim.world.textures`), given to Mitsuba as an in-memory float
   ``bitmap`` mapped by the mesh's uv with ``raw = true`` (the values are used as written, no
   sRGB curve);
 - ``{ image = "file", transfer = "srgb" | "linear", filter = "bilinear" | "nearest" }`` is an
@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from core.errors import InputError
 from core.image_io import read_linear
-from sim.world_textures import TEXTURES, texture_filter, texture_image
+from sim.world.textures import TEXTURES, texture_filter, texture_image
 
 __all__ = ["instantiate_bsdf", "material_dict", "material_files", "needs_uv"]
 

@@ -3,9 +3,9 @@
 :class:`EmulatedServo` keeps the control table (EEPROM writes refused while torque is on,
 value ranges, position limits in Position Control Mode), computes the items that change by
 themselves (Moving, Present Position, Present Velocity...) from its move
-(:class:`sim.dynamixel_motion.TrapezoidMove`), and raises its hardware errors (overload,
+(:class:`sim.dynamixel.motion.TrapezoidMove`), and raises its hardware errors (overload,
 overheating; Shutdown turns torque off). It knows no wire format and no faults: the chain
-(:mod:`sim.dynamixel_emulator`) reads and writes it and keeps its fault counters on it.
+(:mod:`sim.dynamixel.emulator`) reads and writes it and keeps its fault counters on it.
 """
 
 from __future__ import annotations
@@ -13,14 +13,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from sim.dynamixel_motion import (
+from sim.dynamixel.motion import (
     TICKS_PER_TURN,
     VELOCITY_UNIT_RPM,
     TrapezoidMove,
     acceleration_ticks_per_s2,
     velocity_ticks_per_s,
 )
-from sim.dynamixel_protocol import ALERT_BIT, ResultError, from_le, u_le
+from sim.dynamixel.protocol import ALERT_BIT, ResultError, from_le, u_le
 
 __all__ = [
     "CONTROL_ITEMS",

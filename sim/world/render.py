@@ -25,7 +25,7 @@ Reuse
 Geometry pass
     An ``aov`` integrator (``p:position``, ``dd.y:depth``) with a ``stratified`` sampler of one
     unjittered sample: one ray through each pixel's centre, the surface point it hits (depth 0
-    where it misses). It says which surface each pixel shows (:mod:`sim.world_visibility`).
+    where it misses). It says which surface each pixel shows (:mod:`sim.world.visibility`).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ from sim.mitsuba_reference import (
     load_mitsuba,
     perspective_sensor,
 )
-from sim.world_files import World
+from sim.world.files import World
 
 __all__ = ["PixelGeometry", "WorldImage", "WorldRenderer", "render_environment_image"]
 
@@ -217,7 +217,7 @@ def render_environment_image(
 ) -> WorldImage:
     """The world path-traced under an equirectangular panorama (emitters hidden).
 
-    Parameters are those of :func:`sim.mitsuba_world.render_world_environment`.
+    Parameters are those of :func:`sim.world.mitsuba.render_world_environment`.
     """
     _check_settings(spp, max_depth)
     rgb = np.asarray(panorama_rgb)

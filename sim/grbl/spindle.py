@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from sim.grbl_motion import Block
+from sim.grbl.motion import Block
 
 __all__ = ["SpindleOutput", "pwm_speed"]
 

@@ -5,16 +5,16 @@ on it as a chain of X-series servos would: PING, READ, WRITE, SYNC_READ, SYNC_WR
 (unicast and, where the protocol allows, broadcast), status packets with the result code and the
 hardware-error alert bit, the XM430-W350 control table (EEPROM writes refused while torque is on),
 a trapezoidal motion model against a monotonic clock, position limits, temperature and hardware
-errors. Faults are injected by a frozen :class:`sim.dynamixel_faults.FaultConfig` (dropped,
+errors. Faults are injected by a frozen :class:`sim.dynamixel.faults.FaultConfig` (dropped,
 corrupted and delayed replies, a servo that stops answering, an overload after N moves),
 deterministic for a seed. One servo's control table and motion are
-:class:`sim.dynamixel_servo.EmulatedServo`; this module is the chain: the pty, the serving
+:class:`sim.dynamixel.servo.EmulatedServo`; this module is the chain: the pty, the serving
 thread and the instructions.
 
 >>> with ServoChainEmulator([ServoSpec(id=1)]) as emulator:  # doctest: +SKIP
 ...     port = PortHandler(emulator.port)
 
-The emulator has its own control table and wire code (``sim/dynamixel_protocol.py``) and shares
+The emulator has its own control table and wire code (``sim/dynamixel/protocol.py``) and shares
 nothing with the driver, so a wrong constant on one side shows up as a failing test.
 """
 
@@ -28,8 +28,8 @@ import tty
 from collections.abc import Callable, Sequence
 from types import TracebackType
 
-from sim.dynamixel_faults import FaultConfig, FaultInjector
-from sim.dynamixel_protocol import (
+from sim.dynamixel.faults import FaultConfig, FaultInjector
+from sim.dynamixel.protocol import (
     BROADCAST_ID,
     Instruction,
     Packet,
@@ -39,7 +39,7 @@ from sim.dynamixel_protocol import (
     from_le,
     u_le,
 )
-from sim.dynamixel_servo import CONTROL_ITEMS, EmulatedServo, ServoSpec
+from sim.dynamixel.servo import CONTROL_ITEMS, EmulatedServo, ServoSpec
 
 __all__ = ["ServoChainEmulator"]
 

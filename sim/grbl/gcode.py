@@ -1,9 +1,9 @@
 """GRBL 1.1's G-code subset: words, modal groups, the modal state, and what a block asks for.
 
 :func:`interpret` checks a filtered line as ``gcode.c`` does, in GRBL's order, and refuses it
-with :class:`sim.grbl_words.Refused` (``error:N``) before changing anything; a valid line
+with :class:`sim.grbl.words.Refused` (``error:N``) before changing anything; a valid line
 updates the :class:`ModalState` and returns the :data:`Action` s the machine is to carry out,
-in GRBL's order of execution. The subset: G0/G1 with F, G2/G3 arcs (:mod:`sim.grbl_arcs`),
+in GRBL's order of execution. The subset: G0/G1 with F, G2/G3 arcs (:mod:`sim.grbl.arcs`),
 G90/G91, G20/G21, G53, G92/G92.1, G4, G17-19, G54-59 (offsets zero), G94, M3/M4/M5 with S,
 M7/M8/M9, T. Probing, G10/G28/G30, tool length offsets and the other words are refused
 (``error:20``, or ``error:36`` for unused words).
@@ -20,9 +20,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from sim.grbl_arcs import arc_offset, arc_points
-from sim.grbl_motion import Vec
-from sim.grbl_words import Refused, words
+from sim.grbl.arcs import arc_offset, arc_points
+from sim.grbl.motion import Vec
+from sim.grbl.words import Refused, words
 
 __all__ = [
     "Action",
