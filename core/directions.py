@@ -17,6 +17,9 @@ else works in radians and unit vectors. Nothing outside this module converts bet
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -34,6 +37,7 @@ __all__ = [
     "hemisphere_layout",
     "normalize",
     "panorama_azimuths",
+    "panorama_bilinear_cell",
     "panorama_directions",
     "panorama_inclinations",
     "panorama_pixel_from_direction",
@@ -162,6 +166,27 @@ def panorama_pixel_from_direction(
     row = inclination * height / np.pi - 0.5
     col = np.mod((np.pi - azimuth) * width / (2.0 * np.pi), width) - 0.5
     return row, col
+
+
+@numba.njit(cache=True, inline="always")
+def panorama_bilinear_cell(
+    x: float, y: float, z: float, yaw: float, height: int, width: int
+) -> tuple[int, int, int, int, float, float]:
+    """The bilinear cell of a direction in a panorama turned by ``yaw``: a numba kernel's lookup.
+
+    The scalar, numba-callable twin of :func:`panorama_pixel_from_direction` (same mapping)
+    for the kernels that read a panorama (or maps of it) per direction: the direction
+    (x, y, z), unit, is turned back by ``yaw`` (radians, counter-clockwise seen from above;
+    the panorama is held at yaw 0). Returns rows r0, r1 = r0 + 1, columns c0, c1 and the
+    fractions (row - r0, col - c0); columns wrap, rows clamp to the panorama.
+    """
+    azimuth = math.atan2(y, x) - yaw
+    inclination = math.acos(min(1.0, max(-1.0, z)))
+    col = ((math.pi - azimuth) * width / (2.0 * math.pi)) % width - 0.5
+    row = min(max(inclination * height / math.pi - 0.5, 0.0), height - 1.0)
+    c0 = math.floor(col)
+    r0 = min(int(row), height - 2)
+    return r0, r0 + 1, int(c0) % width, (int(c0) + 1) % width, row - r0, col - c0
 
 
 def panorama_pixel_index(

@@ -51,7 +51,7 @@ from scipy.spatial import cKDTree
 from core.brdf import specular_lobe, toward_eye
 from core.camera_model import PinholeCamera
 from core.colour import REC709_LUMINANCE
-from core.directions import panorama_directions, panorama_pixel_index
+from core.directions import panorama_directions, panorama_pixel_index, rotate_directions_yaw
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
@@ -81,7 +81,6 @@ from render.precomputed_lighting import (
     lobe_albedo,
     prefilter_panorama,
     rotate_sh_yaw,
-    rotate_yaw,
     sample_transfer,
     sh_norms,
     shade_precomputed,
@@ -591,7 +590,9 @@ class ModelRelighter:
         # the share of light from outside the measured region is read off a map of the region.
         grid = prefilter.lights
         lights = LightSet(
-            rotate_yaw(grid.directions, yaw_deg), grid.rgb * exposure, grid.solid_angle_sr
+            rotate_directions_yaw(grid.directions, yaw_deg),
+            grid.rgb * exposure,
+            grid.solid_angle_sr,
         )
         if any(isinstance(self.models.fits[n], BasisFit) for n in self.choice.names):
             self._lighting = prepare_lighting(self.models, lights)
@@ -606,7 +607,8 @@ class ModelRelighter:
             )
         bright = prefilter.bright
         self._bright = prepare_lighting(
-            self.models, LightSet(rotate_yaw(bright.directions, yaw_deg), bright.rgb * exposure)
+            self.models,
+            LightSet(rotate_directions_yaw(bright.directions, yaw_deg), bright.rgb * exposure),
         )
         self._precomputed = (prefilter, yaw_deg, exposure)
 

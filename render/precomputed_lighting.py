@@ -34,7 +34,11 @@ from numpy.typing import NDArray
 
 from core.brdf import specular_lobe, toward_eye
 from core.colour import REC709_LUMINANCE
-from core.directions import panorama_directions, panorama_solid_angles
+from core.directions import (
+    panorama_bilinear_cell,
+    panorama_directions,
+    panorama_solid_angles,
+)
 from core.errors import InputError
 from core.light_set import LightSet, grid_lights
 from processing.interpolation import interpolation_weights
@@ -49,7 +53,6 @@ __all__ = [
     "lobe_albedo",
     "prefilter_panorama",
     "rotate_sh_yaw",
-    "rotate_yaw",
     "sample_transfer",
     "sh_basis",
     "sh_norms",
@@ -175,14 +178,6 @@ def rotate_sh_yaw(coefficients: NDArray[np.floating], yaw_deg: float) -> NDArray
             out[centre + m] = a * cos - b * sin
             out[centre - m] = a * sin + b * cos
     return out
-
-
-def rotate_yaw(directions: NDArray[np.floating], yaw_deg: float) -> NDArray[np.float64]:
-    """Directions (N, 3) turned ``yaw_deg`` counter-clockwise about +z."""
-    yaw = math.radians(yaw_deg)
-    cos, sin = math.cos(yaw), math.sin(yaw)
-    turn = np.array([[cos, -sin, 0.0], [sin, cos, 0.0], [0.0, 0.0, 1.0]])
-    return np.asarray(directions, dtype=np.float64) @ turn.T
 
 
 @numba.njit(cache=True, parallel=True)
@@ -392,22 +387,6 @@ def sample_transfer(
 
 
 @numba.njit(cache=True, inline="always")
-def _map_cell(
-    x: float, y: float, z: float, yaw: float, height: int, width: int
-) -> tuple[int, int, int, int, float, float]:
-    # The bilinear cell of direction (x, y, z) turned back by the yaw in a (height, width)
-    # panorama map (the maps hold the panorama at yaw 0): rows r0, r1, columns c0, c1 and the
-    # fractions; columns wrap, rows clamp.
-    azimuth = math.atan2(y, x) - yaw
-    inclination = math.acos(min(1.0, max(-1.0, z)))
-    col = ((math.pi - azimuth) * width / (2.0 * math.pi)) % width - 0.5
-    row = min(max(inclination * height / math.pi - 0.5, 0.0), height - 1.0)
-    c0 = math.floor(col)
-    r0 = min(int(row), height - 2)
-    return r0, r0 + 1, int(c0) % width, (int(c0) + 1) % width, row - r0, col - c0
-
-
-@numba.njit(cache=True, inline="always")
 def _bilinear(
     maps: NDArray[np.float32],
     level: int,
@@ -501,7 +480,7 @@ def shade_precomputed(
             low = albedo[level, i_cos] * (1.0 - f_cos) + albedo[level, i_cos + 1] * f_cos
             high = albedo[level + 1, i_cos] * (1.0 - f_cos) + albedo[level + 1, i_cos + 1] * f_cos
             scale = seen * ((1.0 - t_alpha) * low + t_alpha * high) * exposure
-            cell = _map_cell(rx, ry, rz, yaw, height, width)
+            cell = panorama_bilinear_cell(rx, ry, rz, yaw, height, width)
             for c in range(3):
                 mean = (1.0 - t_alpha) * _bilinear(specular, level, cell, c) + t_alpha * (
                     _bilinear(specular, level + 1, cell, c)

@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -109,3 +111,22 @@ def test_bad_directions_are_refused() -> None:
         normalize([[1, 0, 0], [0, 0, 0]])
     with pytest.raises(InputError, match="W = 2H"):
         panorama_directions(10, 30)
+
+
+def test_the_numba_cell_is_the_panorama_mapping_turned_back_by_the_yaw() -> None:
+    from core.directions import panorama_bilinear_cell, panorama_pixel_from_direction
+
+    height, width, yaw = 16, 32, math.radians(37.0)
+    rng = np.random.default_rng(4)
+    directions = rng.normal(size=(200, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    row, col = panorama_pixel_from_direction(
+        rotate_directions_yaw(directions, -37.0), height, width
+    )
+    for (x, y, z), r, c in zip(directions, row, col, strict=True):
+        r0, r1, c0, c1, fr, fc = panorama_bilinear_cell(x, y, z, yaw, height, width)
+        clamped = min(max(r, 0.0), height - 1.0)
+        assert r1 == r0 + 1 and 0 <= r0 <= height - 2 and c1 == (c0 + 1) % width
+        assert r0 + fr == pytest.approx(clamped, abs=1e-9)
+        offset = (c0 + fc - c) % width  # the same column, whichever side of the wrap
+        assert min(offset, width - offset) < 1e-9

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from core.camera_model import PinholeCamera
-from core.directions import panorama_directions, panorama_solid_angles
+from core.directions import panorama_directions, panorama_solid_angles, rotate_directions_yaw
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
@@ -18,7 +18,6 @@ from render.precomputed_lighting import (
     lobe_albedo,
     prefilter_panorama,
     rotate_sh_yaw,
-    rotate_yaw,
     sh_basis,
 )
 from sim.field import field_cameras, simulate_field
@@ -31,7 +30,7 @@ def test_harmonics_are_orthonormal_and_a_yaw_turns_their_coefficients() -> None:
     gram = (basis * omega[:, None]).T @ basis
     assert np.abs(gram - np.eye(25)).max() < 1e-3
     lobe = np.exp(3.0 * directions @ np.array([0.6, 0.0, 0.8]))
-    turned = np.exp(3.0 * rotate_yaw(directions, -40.0) @ np.array([0.6, 0.0, 0.8]))
+    turned = np.exp(3.0 * rotate_directions_yaw(directions, -40.0) @ np.array([0.6, 0.0, 0.8]))
     coefficients = basis.T @ (lobe * omega)
     expected = basis.T @ (turned * omega)
     assert rotate_sh_yaw(coefficients[:, None], 40.0)[:, 0] == pytest.approx(expected, abs=1e-9)
