@@ -14,6 +14,7 @@ needs; a small one is a single image per plane.
 
 from __future__ import annotations
 
+import math
 import time
 import traceback
 from collections.abc import Callable
@@ -27,7 +28,7 @@ from core.progress import ProgressEvent, reporting_to
 if TYPE_CHECKING:
     from render.web_export import WebModel
 
-__all__ = ["LIGHT_MODELS", "ChosenLight", "LightView"]
+__all__ = ["LIGHT_MODELS", "CapturedLight", "ChosenLight", "LightView"]
 
 #: The models the page relights with: HSH of order 3 first (the RTI tools' usual choice for
 #: dome captures), PTM beside it.
@@ -118,6 +119,66 @@ class LightView:
         if not path.is_relative_to(root) or not path.is_file():
             return None
         return path
+
+
+class CapturedLight:
+    """The captured image nearest a light: what the page shows before the fits are written.
+
+    Measured data, no fit: the page can move the light from its first second (among the
+    captured lights, as a capture's own browser does) while the server writes the HSH and PTM
+    planes. An image over :data:`SERVER_PIXELS` is sent every k-th pixel in both directions.
+
+    Parameters
+    ----------
+    field : ReflectanceField of pixels
+    """
+
+    def __init__(self, field: ReflectanceField) -> None:
+        from core.camera_model import rig_to_camera
+
+        self.field = field
+        #: The measured lights in the camera's frame (T, 3): x right, y up, z to the camera.
+        self.directions = rig_to_camera(field.light_directions, field.cameras[0])
+        height, width = field.image_shape or (0, 0)
+        self.step = max(1, math.ceil(math.sqrt(width * height / SERVER_PIXELS)))
+        #: The pictures' (width, height).
+        self.size = (-(-width // self.step), -(-height // self.step))
+        self._scale: float | None = None
+
+    def _display_scale(self) -> float:
+        """1 for an RTI capture (its 8-bit values); a field of radiance: its overhead image's."""
+        import numpy as np
+
+        from processing.image_quality import display_scale
+
+        if self._scale is None:
+            self._scale = 1.0
+            if self.field.provenance.get("source") != "rti":
+                overhead = int(np.argmax(self.directions[:, 2]))
+                values = self.field.light_radiance(0, overhead)
+                self._scale = display_scale(values[None, self.field.visibility[0]])
+        return self._scale
+
+    def nearest(self, light: tuple[float, float, float]) -> int:
+        """Index of the measured light nearest ``light`` (camera frame, unit, z >= 0)."""
+        import numpy as np
+
+        x, y, z = light
+        if not all(np.isfinite(light)) or z < 0 or abs(x * x + y * y + z * z - 1) > 1e-3:
+            raise InputError(f"light {light}: a unit direction with z >= 0 is needed")
+        return int(np.argmax(self.directions @ np.array(light, dtype=np.float64)))
+
+    def picture(self, light: tuple[float, float, float]) -> tuple[bytes, int]:
+        """PNG of the captured image nearest ``light``, and that light's index."""
+        from core.image_io import encode_picture
+        from processing.image_quality import clipped_srgb_8bit
+        from render.field_view import FieldView
+
+        index = self.nearest(light)
+        image = FieldView.captured(self.field, 0).image(self.field.light_radiance(0, index))
+        shown = image[:: self.step, :: self.step]
+        _, png = encode_picture(clipped_srgb_8bit(shown, self._display_scale()), ".png")
+        return png, index
 
 
 #: Largest image the server relights whole for the page (pixels): beyond, the page keeps to

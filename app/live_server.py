@@ -49,7 +49,7 @@ from typing import Any
 
 from aiohttp import WSMsgType, web
 
-from app.light_view import ChosenLight, LightView
+from app.light_view import CapturedLight, ChosenLight, LightView
 from core.errors import InputError, RigError
 from core.field_store import ReflectanceField
 from core.image_io import encode_picture
@@ -114,6 +114,7 @@ class _Viewer:
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="relight")
         self.light: LightView | None = None
         self.chosen: ChosenLight | None = None
+        self.captured: CapturedLight | None = None
         # The chosen method's frames run beside the session's (its choice takes a while).
         self.light_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="light")
         self.stopping = threading.Event()
@@ -122,6 +123,7 @@ class _Viewer:
         if session.field.sample_kind == "pixels":
             self.light = LightView(session.field, uploads / "rti")
             self.chosen = ChosenLight(session.field)
+            self.captured = CapturedLight(session.field)
         self.status = "ready"
         self.field = session.field
         self.source = session.source
@@ -265,14 +267,38 @@ async def _light(request: web.Request) -> web.Response:
     light = request.app[VIEWER].light
     if light is None:
         raise _error(web.HTTPNotFound, "a field of points has no directional light view")
-    chosen = request.app[VIEWER].chosen
-    assert chosen is not None  # made with the light view
+    viewer = request.app[VIEWER]
+    chosen, captured = viewer.chosen, viewer.captured
+    assert chosen is not None and captured is not None  # made with the light view
+    height, width = viewer.field.image_shape or (0, 0)
     return web.json_response({
+        "image": {"width": width, "height": height},
         **light.describe(),
         "chosen": {
             "status": chosen.status, "method": chosen.method, "unavailable": chosen.available(),
         },
+        "captured": {
+            "width": captured.size[0], "height": captured.size[1],
+            "lights": len(captured.directions),
+        },
     })  # fmt: skip
+
+
+async def _captured_picture(request: web.Request) -> web.Response:
+    viewer = request.app[VIEWER]
+    if viewer.captured is None:
+        raise _error(web.HTTPNotFound, "a field of points has no directional light view")
+    try:
+        x, y, z = (float(request.query[axis]) for axis in "xyz")
+    except (KeyError, ValueError):
+        raise _error(web.HTTPBadRequest, "send the light as ?x=X&y=Y&z=Z (numbers)") from None
+    # Not on the light worker: this picture is what the page shows while that one works.
+    loop = asyncio.get_running_loop()
+    try:
+        png, index = await loop.run_in_executor(None, viewer.captured.picture, (x, y, z))
+    except RigError as error:
+        raise _error(web.HTTPBadRequest, str(error)) from None
+    return web.Response(body=png, content_type="image/png", headers={"X-Light": str(index)})
 
 
 async def _chosen_picture(request: web.Request) -> web.Response:
@@ -489,6 +515,7 @@ def build_app(session: LiveSession | PendingSession, uploads: Path) -> web.Appli
     app.router.add_get("/{name:viewer\\.js|viewer\\.css|light\\.js}", _static)
     app.router.add_get("/api/light", _light)
     app.router.add_get("/api/light/chosen.png", _chosen_picture)
+    app.router.add_get("/api/light/captured.png", _captured_picture)
     app.router.add_get("/rti/{path:.+}", _light_file)
     app.router.add_get("/api/state", _state)
     app.router.add_post("/api/open", _open_session)

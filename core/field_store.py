@@ -563,6 +563,23 @@ class ReflectanceField:
             )
         return values
 
+    def light_radiance(self, camera: int, light: int) -> NDArray[np.float32]:
+        """Radiance (P, 3), float32, of every sample under one light seen by ``camera``.
+
+        One captured image of a field of pixels: a read of that light's chunks only, uncached,
+        checked as :meth:`camera_radiance` checks.
+        """
+        s, t, _ = self.shape
+        if not (0 <= camera < s and 0 <= light < t):
+            raise InputError(f"camera {camera}, light {light} outside the {s} x {t} of {self.path}")
+        values = read_checked(self.path, self.radiance, (camera, light))
+        if not np.isfinite(values).all():
+            raise DatasetError(
+                f"{self.path}: non-finite radiance (NaN or infinity) seen by camera {camera} "
+                f"under light {light}: rebuild the store from its source"
+            )
+        return np.asarray(values, dtype=np.float32)
+
     @property
     def sample_chunk(self) -> int:
         """Samples per stored radiance chunk (P for stores of one chunk per slab)."""

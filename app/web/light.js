@@ -78,8 +78,7 @@ const lightView = (() => {
     gl: null, program: null, uniforms: {}, info: null, models: {}, model: null,
     light: [0, 0, 1], view: { scale: 1, x: 0, y: 0 }, mode: 0,
     specular: [0.6, 0.5, 40], normals: null, tiles: new Map(), frames: 0, drawn: 0,
-    server: { texture: null, shown: null, busy: null, ms: 0, error: null },
-    pending: false, ready: false,
+    pending: false, ready: false, fitsReady: false, firstModel: null, serverStatus: "",
   };
 
   // --- the bases: the project's (processing.sample_models), in the viewer's order --------
@@ -203,28 +202,41 @@ const lightView = (() => {
     return texture;
   }
 
-  // The chosen method, relit by the server: one picture per light, one request at a time
-  // (a drag asks for the latest light once the picture under way arrives); the last picture
-  // stays on screen meanwhile.
+  // A picture the server makes per light (the captured image nearest it, or the chosen
+  // method relit): one request at a time per model (a drag asks for the latest light once the
+  // picture under way arrives); the last picture stays on screen meanwhile.
+  function serverModel(name, info, url) {
+    return {
+      name, type: "image", info, images: 1, server: true, url, levels: [[info.width, info.height]],
+      scale: new Float32Array(MAX_TERMS * 3).fill(1), bias: new Float32Array(MAX_TERMS * 3),
+      held: { texture: null, shown: null, busy: null, ms: 0, error: null, light: null },
+    };
+  }
+
   function serverPicture(model) {
     const wanted = state.light.join(",");
-    const held = state.server;
+    const held = model.held;
     if (held.shown !== wanted && !held.busy) {
       held.busy = wanted;
       const [x, y, z] = state.light;
       const started = performance.now();
-      loadImage(`api/light/chosen.png?x=${x}&y=${y}&z=${z}`).then((img) => {
+      fetch(`${model.url}?x=${x}&y=${y}&z=${z}`).then(async (response) => {
+        if (!response.ok) {
+          // The server says why (its choice failed, the image is too large): show it.
+          throw new Error((await response.json().catch(() => ({}))).error || "the server failed");
+        }
+        const light = response.headers.get("X-Light");
+        const img = await createImageBitmap(await response.blob());
         if (held.texture) state.gl.deleteTexture(held.texture);
         held.texture = planeTexture([img], img.width, img.height);
         held.shown = held.busy;
+        held.light = light === null ? null : Number(light);
         held.ms = performance.now() - started;
         held.busy = null;
         redraw();
-      }, async () => {
-        // The server says why (its choice failed, the image is too large): show it.
-        const response = await fetch(`api/light/chosen.png?x=${x}&y=${y}&z=${z}`);
+      }).catch((error) => {
         held.busy = null;
-        held.error = (await response.json().catch(() => ({}))).error || "the server failed";
+        held.error = String(error.message || error);
         status(held.error);
       });
     }
@@ -235,9 +247,9 @@ const lightView = (() => {
     const gl = state.gl;
     const u = state.uniforms;
     const missing = serverPicture(model);
-    if (!state.server.texture) return missing;
+    if (!model.held.texture) return missing;
     gl.activeTexture(gl.TEXTURE0);
-    gl.bindTexture(gl.TEXTURE_2D_ARRAY, state.server.texture);
+    gl.bindTexture(gl.TEXTURE_2D_ARRAY, model.held.texture);
     gl.uniform4f(u.rect, 0, 0, model.info.width, model.info.height);
     gl.uniform4f(u.uvRect, 0, 0, 1, 1);
     gl.drawArrays(gl.TRIANGLE_STRIP, 0, 4);
@@ -387,8 +399,13 @@ const lightView = (() => {
     $("light-angles").textContent = `azimuth ${azimuth.toFixed(1)}°, elevation ${elevation.toFixed(1)}°`;
     const zoom = state.view.scale >= 1 ? `×${state.view.scale.toFixed(1)}` : `1/${(1 / state.view.scale).toFixed(1)}`;
     const loading = missing ? `, loading ${missing} tile${missing > 1 ? "s" : ""}` : "";
-    if (state.model.server) {
-      const held = state.server;
+    if (state.model.name === "captured") {
+      const held = state.model.held;
+      const which = held.light === null ? "" : ` (light ${held.light + 1} of ${state.lights})`;
+      const fits = state.fitsReady ? "" : ` — the fits: ${state.serverStatus || "waiting"}`;
+      status(`the captured image nearest the light${which}, zoom ${zoom}${fits}`);
+    } else if (state.model.server) {
+      const held = state.model.held;
       const waiting = held.busy ? " — relighting on the server…" : "";
       const method = state.chosenMethod ? `${state.chosenMethod}, ` : "";
       status(`the chosen method (${method}server: ${held.ms.toFixed(0)} ms a light)${waiting}, zoom ${zoom}`);
@@ -403,7 +420,7 @@ const lightView = (() => {
   async function pollChosen() {
     if (state.polling) return;
     state.polling = true;
-    while (state.server.busy && !state.chosenMethod) {
+    while (state.models.chosen.held.busy && !state.chosenMethod) {
       const chosen = (await (await fetch("api/light")).json()).chosen;
       if (chosen.method) state.chosenMethod = chosen.method;
       else status(`server: ${chosen.status}…`);
@@ -506,6 +523,7 @@ const lightView = (() => {
     canvas.addEventListener("dblclick", fit);
     $("light-model").addEventListener("change", (e) => {
       state.model = state.models[e.target.value];
+      state.chose = true;
       redraw();
     });
     $("light-mode").addEventListener("change", (e) => {
@@ -528,19 +546,6 @@ const lightView = (() => {
 
   async function start() {
     $("light-section").hidden = false;
-    // The server fits the models in the background: say what it does until they are written.
-    let described;
-    for (;;) {
-      const response = await fetch("api/light");
-      described = await response.json();
-      if (described.status === "ready") break;
-      if (described.status === "failed") {
-        status(`the light view could not be prepared: ${described.error}`);
-        return;
-      }
-      status(`server: ${described.status}… (${described.elapsed_s} s)`);
-      await new Promise((r) => setTimeout(r, 400));
-    }
     const canvas = $("light-canvas");
     const gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, antialias: false });
     if (!gl) {
@@ -550,45 +555,67 @@ const lightView = (() => {
     state.gl = gl;
     status("compiling the shader…");
     compile();
-    for (const [name, entry] of Object.entries(described.models)) {
-      state.models[name] = await loadModel(name, entry);
-    }
+    let described = await (await fetch("api/light")).json();
+    // The captured images first: the light moves from the first second, among the measured
+    // lights, while the server fits the models the light moves freely with.
+    const info = { width: described.image.width, height: described.image.height, nplanes: 3 };
+    state.lights = described.captured.lights;
+    state.models.captured = serverModel("captured", info, "api/light/captured.png");
+    state.models.chosen = serverModel("chosen", info, "api/light/chosen.png");
     const select = $("light-model");
-    select.replaceChildren(...Object.keys(state.models).map((name) => Object.assign(
-      document.createElement("option"), {
-        value: name, textContent: `${name.toUpperCase()} fit`,
-        title: `quantised to 8 bits: ${described.models[name].rms_error} levels RMS at the measured lights`,
-      })));
-    const chosen = described.chosen;
-    const info = { width: described.width, height: described.height, nplanes: 3 };
-    state.models.chosen = {
-      name: "chosen", type: "image", info, images: 1, server: true, levels: [[info.width, info.height]],
-      scale: new Float32Array(MAX_TERMS * 3).fill(1), bias: new Float32Array(MAX_TERMS * 3),
-    };
-    select.append(Object.assign(document.createElement("option"), {
-      value: "chosen", textContent: "the chosen method (server)", disabled: Boolean(chosen.unavailable),
-      title: chosen.unavailable || "the method rig relight --lights chooses by held-out error, relit on the server for each light (the first light waits for the choice)",
-    }));
-    state.model = state.models[select.value];
-    const normals = await loadImage(described.normals).catch(() => null);
+    const option = (value, textContent, title, disabled = false) => Object.assign(
+      document.createElement("option"), { value, textContent, title, disabled });
+    select.replaceChildren(option("captured", "captured image (nearest light)",
+      "no fit: the measured image whose light is nearest the one asked for"));
+    state.model = state.models.captured;
+    state.firstModel = "captured";
     state.normals = gl.createTexture();
     gl.bindTexture(gl.TEXTURE_2D, state.normals);
-    if (normals && Math.max(normals.width, normals.height) <= gl.getParameter(gl.MAX_TEXTURE_SIZE)) {
-      gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA8, gl.RGBA, gl.UNSIGNED_BYTE, normals);
-    } else {
-      gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA8, 1, 1, 0, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array([128, 128, 255, 255]));
-      for (const option of $("light-mode").options) {
-        if (option.value !== "0") { option.disabled = true; option.title = "the normal map is larger than this GPU's textures"; }
-      }
-    }
-    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
-    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
-    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA8, 1, 1, 0, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array([128, 128, 255, 255]));
+    const modes = [...$("light-mode").options].filter((o) => o.value !== "0");
+    for (const mode of modes) { mode.disabled = true; mode.title = "waiting for the normal map (written with the fits)"; }
     wire();
     sizeCanvas();
     state.ready = true;
     setLight(0, 0);
     fit();
+    // The server fits the models in the background: say what it does until they are written.
+    while (described.status !== "ready") {
+      if (described.status === "failed") {
+        state.serverStatus = `could not be prepared: ${described.error}`;
+        status(`the light view's fits could not be prepared: ${described.error}`);
+        return;
+      }
+      state.serverStatus = `${described.status}… (${described.elapsed_s} s)`;
+      redraw();
+      await new Promise((r) => setTimeout(r, 400));
+      described = await (await fetch("api/light")).json();
+    }
+    for (const [name, entry] of Object.entries(described.models)) {
+      state.models[name] = await loadModel(name, entry);
+    }
+    const fits = Object.keys(described.models).map((name) => option(name, `${name.toUpperCase()} fit`,
+      `quantised to 8 bits: ${described.models[name].rms_error} levels RMS at the measured lights`));
+    const chosen = described.chosen;
+    select.replaceChildren(...fits, option("chosen", "the chosen method (server)",
+      chosen.unavailable || "the method rig relight --lights chooses by held-out error, relit on the server for each light (the first light waits for the choice)",
+      Boolean(chosen.unavailable)), ...select.options);
+    const normals = await loadImage(described.normals).catch(() => null);
+    gl.bindTexture(gl.TEXTURE_2D, state.normals);
+    if (normals && Math.max(normals.width, normals.height) <= gl.getParameter(gl.MAX_TEXTURE_SIZE)) {
+      gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA8, gl.RGBA, gl.UNSIGNED_BYTE, normals);
+      for (const mode of modes) { mode.disabled = false; mode.title = ""; }
+    } else {
+      for (const mode of modes) mode.title = "the normal map is larger than this GPU's textures";
+    }
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+    state.fitsReady = true;
+    // The first fit takes over unless the person chose a model meanwhile.
+    if (!state.chose) state.model = state.models[fits[0].value];
+    select.value = state.model.name;
+    redraw();
   }
 
   // The image at its own resolution (one texel a pixel, the finest level), read back:

@@ -24,7 +24,7 @@ from app import light_view, live_server
 from app.cli import main
 from app.cli_view import open_session
 from app.live_server import PendingSession, ViewerServer, start_viewer
-from core.camera_model import PinholeCamera, camera_to_rig
+from core.camera_model import PinholeCamera, camera_to_rig, rig_to_camera
 from core.colour import luminance
 from core.directions import hemisphere_layout
 from core.field_store import FieldStoreWriter, ReflectanceField
@@ -100,7 +100,11 @@ def _open_page(browser: Any, url: str) -> tuple[Any, list[str]]:
     errors: list[str] = []
     page.on("pageerror", lambda error: errors.append(str(error)))
     page.goto(url)
-    page.wait_for_function("() => Number(document.body.dataset.lightFrame || 0) > 0",
+    # The captured images first, then the fits: wait for a frame drawn from a fit.
+    page.wait_for_function("() => lightView.state.fitsReady", timeout=300_000)
+    before = page.evaluate("() => Number(document.body.dataset.lightFrame || 0)")
+    page.evaluate("() => lightView.setLight(0, 0)")
+    page.wait_for_function(f"() => Number(document.body.dataset.lightFrame || 0) > {before}",
                            timeout=300_000)  # fmt: skip
     return page, errors
 
@@ -260,6 +264,54 @@ def test_the_chosen_method_is_relit_by_the_server(browser: Any, tmp_path: Path) 
         page.close()
     finally:
         _off_the_loop(server.stop)
+
+
+def test_the_captured_images_are_shown_before_the_fits(browser: Any, tmp_path: Path) -> None:
+    field = _sphere_field(tmp_path / "sphere.zarr", size=32)
+    server = _serve(field, tmp_path / "sphere.zarr")
+    try:
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        errors: list[str] = []
+        page.on("pageerror", lambda error: errors.append(str(error)))
+        page.goto(server.url)
+        page.wait_for_function("() => Number(document.body.dataset.lightFrame || 0) > 0",
+                               timeout=300_000)  # fmt: skip
+        # The first frame is measured data: no fit was needed to draw it.
+        assert page.evaluate("() => lightView.state.firstModel") == "captured"
+        FOLDER.mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(FOLDER / "sphere-captured-first.png"))
+        page.wait_for_function("() => lightView.state.fitsReady", timeout=300_000)
+        page.select_option("#light-model", "captured")
+        captured = light_view.CapturedLight(field)
+        for t in (3, 40):  # the page asked for a measured light: that light's own image
+            x, y = captured.directions[t][:2]
+            before = page.evaluate("() => Number(document.body.dataset.lightFrame)")
+            page.evaluate(f"() => lightView.setLight({x}, {y})")
+            page.wait_for_function(
+                f"() => Number(document.body.dataset.lightFrame) > {before}", timeout=300_000
+            )
+            shown = _snapshot(page)
+            png, index = captured.picture(tuple(page.evaluate("() => lightView.state.light")))
+            assert index == t and f"light {t + 1} of 49" in page.inner_text("#light-status")
+            expected = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[:, :, ::-1]
+            assert np.array_equal(shown, expected)
+            image = field.light_radiance(0, t).reshape(32, 32, 3)
+            assert np.abs(expected / 255.0 - clipped_display(field, image)).max() < 1 / 255 + 1e-6
+        assert errors == []
+        page.close()
+    finally:
+        _off_the_loop(server.stop)
+
+
+def clipped_display(field: ReflectanceField, image: np.ndarray) -> np.ndarray:
+    """``image`` as ``rig relight --lights`` shows a field of radiance (0..1 display values)."""
+    from core.colour import linear_to_srgb
+    from processing.image_quality import display_scale
+
+    lights = rig_to_camera(field.light_directions, field.cameras[0])
+    overhead = field.light_radiance(0, int(np.argmax(lights[:, 2])))
+    scale = display_scale(overhead[None, field.visibility[0]])
+    return np.asarray(linear_to_srgb(np.clip(image * scale, 0.0, 1.0)))
 
 
 def test_a_large_capture_opens_its_panorama_session_on_request(
