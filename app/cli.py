@@ -302,7 +302,7 @@ def _run_sim_field(args: argparse.Namespace) -> int:
 
 
 def _run_sim_rti(args: argparse.Namespace) -> int:
-    from bench.held_out import make_world_rti
+    from sim.rti_capture import make_world_rti
     from sim.world.mitsuba import load_world
 
     out: Path = args.output

@@ -55,7 +55,7 @@ from core.directions import hemisphere_layout, panorama_directions, panorama_sol
 from core.image_io import read_pixels, write_exr
 from core.sample_data import panorama_path
 from processing.panorama import downsample_panorama, read_panorama
-from processing.rti import write_rti_capture
+from sim.rti_capture import write_rti_capture
 from sim.skies import procedural_sky
 from sim.world.mitsuba import DEFAULT_MAX_DEPTH, load_world, render_world_environment
 from sim.world.render import WorldRenderer

@@ -31,27 +31,24 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from core.camera_model import rig_to_camera
 from core.directions import hemisphere_layout
 from core.field_store import ReflectanceField
 from core.sample_data import rti_capture_path
-from processing.rti import open_field_or_rti, write_rti_capture
+from processing.rti import open_field_or_rti
 from render.evaluation import Evaluation, evaluate, test_field_from_lp
 from render.light_prediction import PREDICTORS
 from render.light_splits import split_lights
 from sim.field import field_cameras, simulate_field
-from sim.world.mitsuba import DEFAULT_MAX_DEPTH, load_world, render_world_field
-from sim.world.rti import render_world_rti
+from sim.rti_capture import RtiSpec, make_world_rti
+from sim.world.mitsuba import load_world, render_world_field
 
 __all__ = [
-    "RTI_SPEC",
     "WORLD_TEST_LIGHTS",
     "HeldOutRecord",
     "WorldSpec",
     "format_held_out",
     "held_out_chart",
     "held_out_record",
-    "make_world_rti",
     "own_family_fields",
     "run_held_out",
     "world_fields",
@@ -163,44 +160,6 @@ def world_fields(
                                progress=progress)  # fmt: skip
         made.append((name, fit, test))
     return made
-
-
-#: An RTI-style capture of a world: (fit lights, test lights, width, height, samples per
-#: pixel); 49 to fit and 20 to predict, as the synthetic RTI benchmarks split their domes.
-RtiSpec = tuple[int, int, int, int, int]
-RTI_SPEC: RtiSpec = (49, 20, 128, 96, 256)
-
-
-def make_world_rti(
-    folder: Path,
-    world: str,
-    spec: RtiSpec,
-    *,
-    max_depth: int = DEFAULT_MAX_DEPTH,
-    image_format: Literal["tiff16", "jpeg"] = "tiff16",
-    progress: bool = False,
-) -> None:
-    """Path-trace an RTI capture of ``world`` into ``folder``: fit.lp, test.lp, images, masks.
-
-    The fit lights are a Fibonacci dome, the test lights a grid (the two never coincide); one
-    exposure for both sets puts 90 % of white at the object's 99.9th percentile. Images are
-    linear 16-bit TIFF or, with ``image_format="jpeg"``, 8-bit sRGB JPEG as public benchmarks
-    ship them (:func:`processing.rti.write_rti_capture`).
-    """
-    fit_count, test_count, width, height, spp = spec
-    fit = render_world_rti(world, fit_count, width=width, height=height, spp=spp,
-                           max_depth=max_depth, progress=progress)  # fmt: skip
-    test = render_world_rti(world, hemisphere_layout(test_count, "grid"), width=width,
-                            height=height, spp=spp, max_depth=max_depth, seed=1,
-                            progress=progress)  # fmt: skip
-    # The two sets' masks differ by the path tracer's noise at the silhouette: pool the values.
-    covered = np.concatenate([fit.images[:, fit.alpha >= 0.5].ravel(),
-                              test.images[:, test.alpha >= 0.5].ravel()])  # fmt: skip
-    scale = 0.9 / max(float(np.percentile(covered, 99.9)), 1e-12)
-    for name, capture in (("fit", fit), ("test", test)):
-        directions = rig_to_camera(capture.directions, capture.camera)
-        write_rti_capture(folder, name, capture.images, directions, scale=scale,
-                          mask=capture.alpha >= 0.5, image_format=image_format)  # fmt: skip
 
 
 def world_rti_captures(

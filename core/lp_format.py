@@ -1,4 +1,4 @@
-"""The RTI ``.lp`` light-position format: reading, writing and the intensity sidecar.
+"""The RTI ``.lp`` light-position format: reading, writing, the intensity and mask sidecars.
 
 The one home of the format: :mod:`capture.lp_export` writes a dataset's light poses with
 :func:`write_lp`, :mod:`processing.rti` imports captures with :func:`read_lp` (and writes a
@@ -32,6 +32,10 @@ Light intensities may instead come from a sidecar beside the ``.lp`` file,
 text, one line ``filename intensity`` per image, names as in the ``.lp`` file, every image
 exactly once in any order; blank lines and lines starting with ``#`` are skipped
 (:func:`read_intensity_sidecar`).
+
+A mask may sit beside the ``.lp`` file too, ``<lp stem>.mask.png`` or else ``mask.png``
+(:data:`MASK_SIDECARS`): non-zero pixels are the object (:func:`processing.rti.import_rti` reads
+it, :func:`sim.rti_capture.write_rti_capture` writes it).
 """
 
 from __future__ import annotations
@@ -50,6 +54,7 @@ from core.errors import DatasetError, InputError
 
 __all__ = [
     "INTENSITY_SIDECARS",
+    "MASK_SIDECARS",
     "LightPositions",
     "read_intensity_sidecar",
     "read_lp",
@@ -61,6 +66,9 @@ _ZERO_LENGTH = 1e-9
 
 #: Intensity sidecars beside an ``.lp`` file, in the order looked for.
 INTENSITY_SIDECARS = ("{stem}.intensities", "intensities.txt")
+
+#: Mask sidecars beside an ``.lp`` file, in the order looked for (``{stem}``: the file's stem).
+MASK_SIDECARS = ("{stem}.mask.png", "mask.png")
 
 
 @dataclass(frozen=True, eq=False)

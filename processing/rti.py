@@ -1,12 +1,14 @@
 """Reflectance Transformation Imaging (RTI) captures as single-view fields.
 
 An RTI capture is one fixed camera and T photographs listed in an ``.lp`` file
-(:mod:`core.lp_format`: the format, a fifth column of light intensities, their sidecar).
+(:mod:`core.lp_format`: the format, a fifth column of light intensities, the sidecars). A
+simulated capture is written by :func:`sim.rti_capture.write_rti_capture`.
 
 Beside the ``.lp`` file (:func:`import_rti` looks for them; the first name found is used):
 
-- a mask, ``<lp stem>.mask.png`` or else ``mask.png``: non-zero pixels are the object, the
-  others are not samples (an explicit ``mask`` argument wins over both);
+- a mask, ``<lp stem>.mask.png`` or else ``mask.png`` (:data:`core.lp_format.MASK_SIDECARS`):
+  non-zero pixels are the object, the others are not samples (an explicit ``mask`` argument
+  wins over both);
 - light intensities (:data:`core.lp_format.INTENSITY_SIDECARS`); a fifth column and a
   sidecar together are refused.
 
@@ -33,10 +35,9 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from core.camera_model import PinholeCamera, camera_to_rig, rig_to_camera
-from core.colour import linear_to_srgb
 from core.errors import DatasetError, InputError
 from core.field_store import BELOW_HORIZON, BelowHorizon, FieldStoreWriter, ReflectanceField
 from core.image_io import (
@@ -48,11 +49,10 @@ from core.image_io import (
     linear_from_pixels,
     pixel_depth,
     read_pixels,
-    write_linear16_tiff,
-    write_srgb8,
 )
 from core.lp_format import (
     INTENSITY_SIDECARS,
+    MASK_SIDECARS,
     LightPositions,
     read_intensity_sidecar,
     read_lp,
@@ -61,14 +61,12 @@ from core.lp_format import (
 from core.progress import progress_bar
 
 __all__ = [
-    "MASK_SIDECARS",
     "NOMINAL_DISTANCE",
     "NOMINAL_FOV_DEG",
     "export_lp",
     "import_rti",
     "open_field_or_rti",
     "rti_camera",
-    "write_rti_capture",
 ]
 
 #: Nominal camera distance (scene units) of an imported RTI view: the data do not record it.
@@ -76,8 +74,6 @@ NOMINAL_DISTANCE = 10.0
 #: Nominal horizontal field of view (degrees) of an imported RTI view: the data do not record it.
 NOMINAL_FOV_DEG = 10.0
 
-#: Mask sidecars beside an ``.lp`` file, in the order looked for (``{stem}``: the file's stem).
-MASK_SIDECARS = ("{stem}.mask.png", "mask.png")
 #: Images decoded ahead of the one being written (each an 8-bit 24-megapixel image is 72 MB).
 DECODE_AHEAD = 2
 #: What ``transfer="auto"`` assumes, as the import reports it.
@@ -243,8 +239,8 @@ def import_rti(
         are linear whatever is asked.
     mask : path of a mask image, or None
         Non-zero pixels are the object: the others are not samples (visibility False). None
-        looks for a sidecar beside the ``.lp`` file (:data:`MASK_SIDECARS`: ``<stem>.mask.png``,
-        then ``mask.png``); without one, every pixel counts.
+        looks for a sidecar beside the ``.lp`` file (:data:`core.lp_format.MASK_SIDECARS`:
+        ``<stem>.mask.png``, then ``mask.png``); without one, every pixel counts.
     below_horizon : {"blocked", "open"}
         What lies below the horizon of the object's base (:data:`core.field_store.BELOW_HORIZON`):
         an RTI object lies on a table or stands on a base, so the default is ``"blocked"`` and
@@ -257,8 +253,9 @@ def import_rti(
         lights (unit directions in the rig frame, (T, 3)), P = H W pixels in row-major order;
         radiance (1, T, P, 3) is each image, linear (grey repeated to RGB), divided by its
         light's intensity when the ``.lp`` file's fifth column or a sidecar
-        (:data:`INTENSITY_SIDECARS`) gives intensities, in the images' relative units (RTI
-        intensities are not calibrated); visibility (1, P) is the mask (all True without one).
+        (:data:`core.lp_format.INTENSITY_SIDECARS`) gives intensities, in the images' relative
+        units (RTI intensities are not calibrated); visibility (1, P) is the mask (all True
+        without one).
         Its ``provenance`` records every assumption: ``transfer`` (requested, applied, the bit
         depth seen), ``mask`` (file, SHA-256, where it was found, pixels selected; None),
         ``intensities`` (source, SHA-256 of a sidecar, the values; None) and ``assumed``, one
@@ -545,57 +542,6 @@ def _intensities(
     record["values"] = [float(value) for value in values]
     record["rule"] = "each image divided by its light's intensity"
     return values, record
-
-
-def write_rti_capture(
-    folder: str | os.PathLike[str],
-    name: str,
-    images: NDArray[np.floating],
-    directions: ArrayLike,
-    *,
-    scale: float,
-    mask: NDArray[np.bool_] | None = None,
-    image_format: Literal["tiff16", "jpeg"] = "tiff16",
-) -> Path:
-    """Write an RTI capture as a dome would leave it: images, ``NAME.lp`` and ``NAME.mask.png``.
-
-    Parameters
-    ----------
-    folder : the capture's folder (created)
-    name : the ``.lp`` file's stem; images are ``images/NAME_NNN.tif``
-    images : ndarray, shape (T, H, W, 3), linear radiance
-    directions : array_like, shape (T, 3), toward each light in the camera frame
-    scale : float > 0, the radiance written as 16-bit white (values above are clipped)
-    mask : ndarray (H, W) of bool, or None: the object's pixels (the sidecar the import reads)
-    image_format : {"tiff16", "jpeg"}
-        ``tiff16``: linear 16-bit TIFF (``images/NAME_NNN.tif``); ``jpeg``: 8-bit sRGB JPEG of
-        quality 95 (``.jpg``), as public RTI benchmarks and most domes ship them.
-        :func:`import_rti` reads 16-bit as linear and 8-bit as sRGB by default.
-
-    Returns
-    -------
-    Path of the ``.lp`` file.
-    """
-    root = Path(folder)
-    pictures = np.asarray(images, dtype=np.float64)
-    if pictures.ndim != 4 or pictures.shape[3] != 3 or not scale > 0:
-        raise InputError(f"images must be (T, H, W, 3) and scale positive, got {pictures.shape}")
-    if image_format not in ("tiff16", "jpeg"):
-        raise InputError(f"image format must be 'tiff16' or 'jpeg', got {image_format!r}")
-    suffix = ".tif" if image_format == "tiff16" else ".jpg"
-    files = [f"images/{name}_{t:03d}{suffix}" for t in range(len(pictures))]
-    for file, image in zip(files, pictures, strict=True):
-        unit = np.clip(image * scale, 0.0, 1.0)
-        if image_format == "tiff16":
-            write_linear16_tiff(root / file, np.round(unit * 65535.0).astype(np.uint16))
-        else:
-            write_srgb8(root / file, np.round(linear_to_srgb(unit) * 255.0).astype(np.uint8))
-    lp = root / f"{name}.lp"
-    write_lp(lp, files, directions)
-    if mask is not None:
-        picture = np.where(np.asarray(mask, dtype=bool), 255, 0).astype(np.uint8)
-        write_srgb8(root / f"{name}.mask.png", np.repeat(picture[:, :, None], 3, axis=2))
-    return lp
 
 
 def export_lp(

@@ -208,7 +208,8 @@ def test_rig_fit_on_a_running_scheduler_and_worker(
 def pixels(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """An imported RTI capture: 40 x 30 pixels under 20 lights, a glossy bumpy relief."""
     from core.directions import hemisphere_layout
-    from processing.rti import import_rti, write_rti_capture
+    from processing.rti import import_rti
+    from sim.rti_capture import write_rti_capture
 
     tmp = tmp_path_factory.mktemp("pixels")
     lights = hemisphere_layout(20, "fibonacci")

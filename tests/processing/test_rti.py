@@ -606,26 +606,3 @@ def test_an_empty_tga_is_refused_by_name_and_line(tmp_path: Path) -> None:
     with pytest.raises(DatasetError, match=r"t\.lp, line 3: .*b\.tga: the file is empty"):
         import_rti(tmp_path / "t.lp", tmp_path / "f.zarr", progress=False)
     assert not (tmp_path / "f.zarr").exists()
-
-
-@pytest.mark.parametrize(("image_format", "depth", "tolerance"),
-                         [("tiff16", "16-bit", 1e-4), ("jpeg", "8-bit", 0.03)])  # fmt: skip
-def test_a_written_capture_imports_back_in_either_format(
-    tmp_path: Path, image_format: str, depth: str, tolerance: float
-) -> None:
-    from core.directions import hemisphere_layout
-    from processing.rti import write_rti_capture
-
-    directions = hemisphere_layout(6, "fibonacci")
-    ramp = np.linspace(0.05, 0.9, 16 * 12, dtype=np.float32).reshape(12, 16)
-    images = np.stack([np.repeat(ramp[:, :, None] * (0.5 + 0.1 * t), 3, axis=2)
-                       for t in range(6)])  # fmt: skip
-    lp = write_rti_capture(tmp_path / "cap", "fit", images, directions, scale=1.0,
-                           image_format=image_format)  # type: ignore[arg-type]  # fmt: skip
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
-    assert field.provenance["transfer"]["bit_depth"] == depth
-    got = field.camera_slab(0).reshape(6, 12, 16, 3)
-    np.testing.assert_allclose(got, np.clip(images, 0, 1), atol=tolerance)
-    with pytest.raises(InputError, match="image format"):
-        write_rti_capture(tmp_path / "x", "fit", images, directions, scale=1.0,
-                          image_format="png")  # type: ignore[arg-type]  # fmt: skip

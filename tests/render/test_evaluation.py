@@ -142,7 +142,7 @@ def test_a_local_cluster_scores_the_same(
 @pytest.fixture(scope="module")
 def capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """An RTI capture of 96 x 64 pixels under 16 lights (a bumpy diffuse relief, 16-bit)."""
-    from processing.rti import write_rti_capture
+    from sim.rti_capture import write_rti_capture
 
     tmp = tmp_path_factory.mktemp("large-view")
     lights = hemisphere_layout(16, "fibonacci")

@@ -11,10 +11,11 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.image_io import write_uint8
 from core.point_spacing import point_spacing
-from processing.rti import import_rti, write_rti_capture
+from processing.rti import import_rti
 from render.field_view import FieldView
 from render.splat import plan_splats, splat
 from sim.field import field_cameras, simulate_field
+from sim.rti_capture import write_rti_capture
 
 
 def test_a_field_of_points_is_splatted_for_any_camera(tmp_path: Path) -> None:

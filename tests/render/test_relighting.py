@@ -11,7 +11,7 @@ from core.directions import hemisphere_layout
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from processing.panorama import adjust_panorama, read_panorama, visible_environment
-from processing.rti import import_rti, write_rti_capture
+from processing.rti import import_rti
 from render.environment_choice import choose_environment_mode
 from render.relight_mode import MOST_ACCURATE_MODELS, most_accurate_mode, open_relighter
 from render.relighter import RelightSettings
@@ -24,6 +24,7 @@ from render.relighting import (
     relight_request,
 )
 from sim.field import field_cameras, simulate_field
+from sim.rti_capture import write_rti_capture
 
 
 @pytest.fixture(scope="module")
