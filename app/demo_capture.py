@@ -146,6 +146,7 @@ def _agreement(
 ) -> list[str]:
     """The captured field against the one the simulator writes directly."""
     from core.field_store import ReflectanceField
+    from processing.image_quality import relative_rmse_values
     from sim.field import field_cameras, simulate_field
 
     direct_path = root / "direct.zarr"
@@ -160,9 +161,7 @@ def _agreement(
         measured[c, t] = False
 
     def relative_rmse(pairs: np.ndarray) -> float:
-        mask = pairs[:, :, None, None] & both[:, None, :, None]
-        mask = np.broadcast_to(mask, a.shape)
-        return float(np.sqrt(np.mean((a[mask] - b[mask]) ** 2) / np.mean(b[mask] ** 2)))
+        return relative_rmse_values(a, b, pairs[:, :, None] & both[:, None, :])
 
     agree = float((built.visibility == direct.visibility).mean())
     filled = f"{relative_rmse(~measured):.2%}" if (~measured).any() else "-"
@@ -232,10 +231,9 @@ def _relight_captured(out: Path, field_path: Path, panorama: Panorama, quick: bo
 
 def _image_error(image: RelitImage, truth: SyntheticImage) -> float:
     """Relative RMSE of a relit image against the ground truth over the pixels both cover."""
-    mask = image.coverage & truth.coverage
-    return float(
-        np.sqrt(np.mean((image.rgb[mask] - truth.rgb[mask]) ** 2) / np.mean(truth.rgb[mask] ** 2))
-    )
+    from processing.image_quality import relative_rmse_values
+
+    return relative_rmse_values(image.rgb, truth.rgb, image.coverage & truth.coverage)
 
 
 def _labelled(picture: NDArray[np.uint8], text: str) -> NDArray[np.uint8]:

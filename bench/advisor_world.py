@@ -32,6 +32,7 @@ from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.sample_data import PanoramaName, panorama_path
+from processing.image_quality import relative_rmse_values
 from processing.panorama import Panorama, downsample_panorama, panorama_from_array, read_panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import PARAMETRIC_MODELS
@@ -116,10 +117,7 @@ def validate_world_advisor(
 
     def true_error(env: str, view: str, image: RelitImage) -> float:
         radiance, seen = truths[(env, view)]
-        shown = image.needed & seen
-        difference = image.radiance[shown].astype(np.float64) - radiance[shown]
-        energy = float(np.sum(radiance[shown].astype(np.float64) ** 2))
-        return float(np.sqrt(np.sum(difference**2) / max(energy, 1e-30)))
+        return relative_rmse_values(image.radiance, radiance, image.needed & seen)
 
     models = models_for_field(field, models=PARAMETRIC_MODELS, progress=True)
     return validate_advisor(name, field, models, views, true_error, panoramas,

@@ -54,6 +54,7 @@ from core.camera_model import PinholeCamera, rig_to_camera
 from core.directions import hemisphere_layout, panorama_directions, panorama_solid_angles
 from core.image_io import read_pixels, write_exr
 from core.sample_data import panorama_path
+from processing.image_quality import relative_rmse_values
 from processing.panorama import downsample_panorama, read_panorama
 from sim.rti_capture import write_rti_capture
 from sim.skies import procedural_sky
@@ -237,19 +238,19 @@ def light_stage_sum(
 def relative_rmse(
     pred: NDArray[np.floating], truth: NDArray[np.floating], mask: NDArray[np.bool_]
 ) -> float | None:
-    """||pred - truth|| / ||truth|| over the masked pixels and all channels (None: empty).
+    """||pred - truth|| / ||truth|| over the masked pixels and all channels.
+
+    :func:`processing.image_quality.relative_rmse_values`, but None (no score) for an empty
+    mask or a black truth.
 
     Parameters
     ----------
     pred, truth : ndarray, shape (H, W, 3), linear radiance
     mask : ndarray, shape (H, W), bool
     """
-    if not mask.any():
+    if not mask.any() or not np.any(np.asarray(truth)[mask]):
         return None
-    p = np.asarray(pred, dtype=np.float64)[mask]
-    t = np.asarray(truth, dtype=np.float64)[mask]
-    norm = float(np.linalg.norm(t))
-    return float(np.linalg.norm(p - t)) / norm if norm > 0 else None
+    return relative_rmse_values(pred, truth, mask)
 
 
 def _ratio(

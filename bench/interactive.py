@@ -24,6 +24,7 @@ import numpy as np
 from core.camera_model import PinholeCamera
 from core.field_store import ReflectanceField
 from core.sample_data import PANORAMA_NAMES, panorama_path
+from processing.image_quality import relative_rmse_values
 from processing.panorama import read_panorama
 from processing.sample_model_store import models_for_field
 from render.model_relight import ModelRelightSettings
@@ -40,13 +41,9 @@ def relative_rmse(image: RelitImage, reference: RelitImage) -> tuple[float, floa
     """(over covered pixels, over the samples shown) of ``image`` against ``reference``."""
     covered = image.coverage & reference.coverage
     shown = image.needed & reference.needed
-
-    def error(a: np.ndarray, b: np.ndarray) -> float:
-        return float(np.sqrt(np.mean((a - b) ** 2) / max(float(np.mean(b**2)), 1e-30)))
-
     return (
-        error(image.rgb[covered], reference.rgb[covered]),
-        error(image.radiance[shown], reference.radiance[shown]),
+        relative_rmse_values(image.rgb, reference.rgb, covered),
+        relative_rmse_values(image.radiance, reference.radiance, shown),
     )
 
 

@@ -30,6 +30,7 @@ from core.camera_model import PinholeCamera
 from core.field_store import ReflectanceField
 from core.light_set import grid_lights
 from core.sample_data import PANORAMA_NAMES, PanoramaName, panorama_path
+from processing.image_quality import relative_rmse_values
 from processing.panorama import Panorama, panorama_from_array, read_panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import SampleModels, choose_model, interpolation_loo
@@ -279,10 +280,6 @@ def _bench_equations(out: Path, panorama: Panorama) -> dict[str, Any]:
     }
 
 
-def _relative_rmse(relit: NDArray[np.floating], truth: NDArray[np.floating], mask: Any) -> float:
-    return float(np.sqrt(np.mean((relit[mask] - truth[mask]) ** 2) / np.mean(truth[mask] ** 2)))
-
-
 def between_view(cameras: list[PinholeCamera], index: int) -> PinholeCamera:
     """A view halfway in azimuth between camera ``index`` and its ring neighbour."""
     ring = sorted(
@@ -347,8 +344,8 @@ def image_errors(image: RelitImage, truth: Truth) -> dict[str, Any]:
     # (the renderer estimates the point spacing, the simulator knows it; their splats differ).
     shown = image.needed & truth.shown
     return {
-        "relative_rmse": _relative_rmse(image.rgb, truth.image.rgb, mask),
-        "sample_relative_rmse": _relative_rmse(image.radiance, truth.radiance, shown),
+        "relative_rmse": relative_rmse_values(image.rgb, truth.image.rgb, mask),
+        "sample_relative_rmse": relative_rmse_values(image.radiance, truth.radiance, shown),
         "psnr_db": 10 * np.log10(peak**2 / mse) if mse > 0 else None,
     }
 

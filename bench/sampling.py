@@ -27,6 +27,7 @@ from core.directions import panorama_directions, panorama_solid_angles
 from core.sample_data import panorama_path
 from processing.environment import LightingControls, light_environment
 from processing.halftone import DIFFUSION_METHODS, _diffuse, _method_tables, error_diffuse
+from processing.image_quality import relative_rmse_values
 from processing.lights import disassemble_lights
 from processing.panorama import panorama_from_array, read_panorama
 from processing.sampling import SAMPLERS, sample_environment
@@ -180,8 +181,7 @@ def bench_accuracy(panoramas: list[Path]) -> list[dict[str, Any]]:
                 row: dict[str, Any] = {"panorama": path.name, "k": k, "configuration": name}
                 for exponent, label in ((1, "diffuse"), (20, "phong20")):
                     estimate = _lobe_responses(normals, lights.directions, light, exponent)
-                    error = np.sqrt(np.mean((estimate - truth[exponent]) ** 2))
-                    row[f"{label}_rel_rmse"] = float(error / np.sqrt(np.mean(truth[exponent] ** 2)))
+                    row[f"{label}_rel_rmse"] = relative_rmse_values(estimate, truth[exponent])
                 rows.append(row)
     return rows
 

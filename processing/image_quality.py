@@ -18,7 +18,8 @@ metric          definition
 ``delta_e``     mean CIEDE2000 colour difference over the mask, CIELAB from the display
                 sRGB values (D65)
 ``rel_rmse``    sqrt(sum (p - r)^2 / sum r^2) over the masked pixels, in linear light,
-                unclipped: the figure the project's other studies report
+                unclipped: the figure the project's other studies report (all of them
+                through :func:`relative_rmse_values`)
 ==============  =========================================================================
 
 scikit-image implements SSIM and CIEDE2000 as the literature defines them; writing either by
@@ -31,7 +32,7 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from skimage.color import deltaE_ciede2000, rgb2lab
 from skimage.metrics import structural_similarity
 
@@ -48,6 +49,7 @@ __all__ = [
     "image_quality",
     "psnr_8bit",
     "relative_rmse",
+    "relative_rmse_values",
     "ssim_8bit",
 ]
 
@@ -114,11 +116,6 @@ def clipped_srgb_8bit(linear: NDArray[np.floating], scale: float = 1.0) -> NDArr
     return np.round(np.asarray(encoded, dtype=np.float64) * 255.0).astype(np.uint8)
 
 
-#: The former name of :func:`clipped_srgb_8bit`, for ``app/light_view.py`` until it is moved
-#: to the new name (another session edits it); not exported.
-display_8bit = clipped_srgb_8bit
-
-
 def psnr_8bit(
     predicted: NDArray[np.floating],
     reference: NDArray[np.floating],
@@ -183,15 +180,57 @@ def delta_e2000(
     return float(np.mean(difference))
 
 
+def relative_rmse_values(
+    predicted: ArrayLike, reference: ArrayLike, mask: ArrayLike | None = None
+) -> float:
+    """The relative RMSE of any values: sqrt(sum (p - r)^2 / sum r^2), in float64.
+
+    The one formula every relative RMSE of the project goes through: images, a field's
+    samples, a benchmark's responses. :func:`relative_rmse` is the checked form for images.
+
+    Parameters
+    ----------
+    predicted, reference : array_like, the same shape (any), linear values
+    mask : array_like of bool, the leading part of that shape (``reference.shape[:mask.ndim]``),
+        or None: the values that count (a mask of pixels (H, W) for images (H, W, 3), of
+        samples for radiance (P, 3), or of every value)
+
+    Returns
+    -------
+    float
+        0 when the selected reference values are all zero or none is selected; NaN when a
+        selected value is NaN (nothing is checked for finiteness).
+
+    Raises
+    ------
+    InputError
+        Shapes that differ, or a mask that is not their leading part.
+    """
+    p, r = np.asarray(predicted), np.asarray(reference)
+    if p.shape != r.shape:
+        raise InputError(f"values to compare must have one shape, got {p.shape} and {r.shape}")
+    if mask is not None:
+        m = np.asarray(mask, dtype=bool)
+        if m.shape != r.shape[: m.ndim]:
+            raise InputError(f"mask {m.shape} is not the leading part of the shape {r.shape}")
+        p, r = p[m], r[m]
+    p, r = p.astype(np.float64, copy=False), r.astype(np.float64, copy=False)
+    energy = float(np.sum(r**2))
+    return math.sqrt(float(np.sum((p - r) ** 2)) / energy) if energy > 0 else 0.0
+
+
 def relative_rmse(
     predicted: NDArray[np.floating],
     reference: NDArray[np.floating],
     mask: NDArray[np.bool_] | None = None,
 ) -> float:
-    """sqrt(sum (p - r)^2 / sum r^2) over the masked pixels, linear light (0 for black r)."""
+    """sqrt(sum (p - r)^2 / sum r^2) over the masked pixels, linear light (0 for black r).
+
+    Images (H, W, 3) checked as every metric here checks them (finite, a mask that selects a
+    pixel); the sum is :func:`relative_rmse_values`'.
+    """
     p, r, m = _checked(predicted, reference, mask)
-    energy = float(np.sum(r[m] ** 2))
-    return math.sqrt(float(np.sum((p[m] - r[m]) ** 2)) / energy) if energy > 0 else 0.0
+    return relative_rmse_values(p, r, m)
 
 
 @dataclass(frozen=True)

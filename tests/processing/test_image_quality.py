@@ -14,6 +14,7 @@ from processing.image_quality import (
     image_quality,
     psnr_8bit,
     relative_rmse,
+    relative_rmse_values,
     ssim_8bit,
 )
 
@@ -92,3 +93,25 @@ def test_bad_shapes_and_values_are_refused() -> None:
     bad[0, 0, 0] = np.nan
     with pytest.raises(InputError, match="finite"):
         relative_rmse(bad, np.zeros((8, 8, 3)))
+
+
+def test_relative_rmse_of_any_values_is_the_images_one() -> None:
+    reference, predicted = _image(5), _image(6)
+    mask = np.zeros(reference.shape[:2], dtype=bool)
+    mask[2:9, 3:17] = True
+    # Images: the same number as the checked metric, from float32 as from float64.
+    assert relative_rmse_values(predicted, reference, mask) == relative_rmse(
+        predicted, reference, mask
+    )
+    single = relative_rmse_values(predicted.astype(np.float32), reference.astype(np.float32))
+    assert single == pytest.approx(relative_rmse(predicted, reference), rel=1e-6)
+    # A field's samples (P, 3) with a mask of samples, and plain values.
+    samples = relative_rmse_values(predicted[mask], reference[mask])
+    assert samples == pytest.approx(relative_rmse(predicted, reference, mask), rel=1e-12)
+    assert relative_rmse_values([3.0, 4.0], [0.0, 4.0]) == pytest.approx(0.75)
+    assert relative_rmse_values([1.0, 2.0], [0.0, 0.0]) == 0.0  # a black reference
+    assert relative_rmse_values(predicted, reference, np.zeros_like(mask)) == 0.0
+    with pytest.raises(InputError, match="one shape"):
+        relative_rmse_values(np.zeros((4, 3)), np.zeros((3, 3)))
+    with pytest.raises(InputError, match="leading part"):
+        relative_rmse_values(predicted, reference, mask.T)
