@@ -197,7 +197,7 @@ def _bench_scheme(
     relighter.render()  # the second frame at this view builds the view's blended field
     view_field, lighting, view = relighter._view_field, relighter._lighting, relighter._view
     assert view_field is not None and lighting is not None and view is not None
-    blend, plan = view
+    blend, plan = view[0], view[1].plan
     assert plan is not None
     relight_ms = median_ms(lambda: relight_view(view_field, lighting), repeats)
     radiance = relight_view(view_field, lighting)
