@@ -16,6 +16,11 @@ Mitsuba 3 the sum is a blend of weight 0.5 of ``diffuse`` (reflectance 2 rho_d) 
 ``specular_reflectance: 2 F0``), which evaluates the same D and separable Smith G (checked in
 the Mitsuba sources and by the comparison in ``tests/sim/test_mitsuba_reference.py``; the
 reflectances are ``srgb`` textures with ``unbounded: true``, since 2 rho_d may exceed 1).
+
+The numba kernels that shade (the simulator's camera and ground truth, the per-sample models'
+relighting) call :func:`shade_light`, the sum f(wi, wo) cos(theta_i) of one light at one
+sample; the split-sum tables of the precomputed lighting and the per-sample fits use its parts
+(:func:`half_vector_cosine`, :func:`specular_lobe`).
 """
 
 from __future__ import annotations
@@ -26,7 +31,19 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["brdf", "ggx_distribution", "smith_g1", "specular_lobe", "toward_eye"]
+__all__ = [
+    "brdf",
+    "cosine",
+    "ggx_distribution",
+    "half_vector_cosine",
+    "shade_light",
+    "smith_g1",
+    "specular_lobe",
+    "toward_eye",
+]
+
+#: A direction or an RGB triple as the numba kernels pass it: three floats.
+Triple = tuple[float, float, float]
 
 
 def ggx_distribution(cos_h: ArrayLike, alpha: ArrayLike) -> NDArray[np.float64]:
@@ -87,9 +104,9 @@ def brdf(
 def specular_lobe(cos_i: float, cos_o: float, cos_h: float, alpha: float) -> float:
     """D(h) G(wi, wo) / (4 cos_i cos_o) for one pair of directions above the surface (1/sr).
 
-    The scalar form of :func:`brdf`'s specular part for the numba kernels (the simulator's
-    shading, the per-sample fits and their relighting; tests hold it equal to :func:`brdf`);
-    ``cos_i`` and ``cos_o`` must be positive.
+    The scalar form of :func:`brdf`'s specular part for the numba kernels (:func:`shade_light`,
+    the per-sample fits, the precomputed lighting's tables; tests hold it equal to
+    :func:`brdf`); ``cos_i`` and ``cos_o`` must be positive.
     """
     if cos_h <= 0.0:
         return 0.0
@@ -101,9 +118,92 @@ def specular_lobe(cos_i: float, cos_o: float, cos_h: float, alpha: float) -> flo
 
 
 @numba.njit(cache=True, inline="always")
+def cosine(normal: Triple, direction: Triple) -> float:
+    """cos(theta) = n . w of two unit vectors, for the numba kernels (x, y, z summed in order).
+
+    Parameters
+    ----------
+    normal, direction : tuple of 3 floats, unit vectors
+
+    Returns
+    -------
+    float, in [-1, 1]
+    """
+    return normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
+
+
+@numba.njit(cache=True, inline="always")
+def half_vector_cosine(normal: Triple, wi: Triple, wo: Triple) -> float:
+    """cos(theta_h): the normal against the half vector h = normalize(wi + wo) (numba).
+
+    Parameters
+    ----------
+    normal, wi, wo : tuple of 3 floats, unit vectors (light ``wi`` and view ``wo`` point away
+        from the surface)
+
+    Returns
+    -------
+    float, in [-1, 1] (wi = -wo, where h is undefined, gives 0)
+    """
+    hx, hy, hz = wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]
+    length = max(math.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
+    return (normal[0] * hx + normal[1] * hy + normal[2] * hz) / length
+
+
+@numba.njit(cache=True, inline="always")
+def shade_light(
+    normal: Triple,
+    wi: Triple,
+    wo: Triple,
+    rho_d: Triple,
+    f0: Triple,
+    alpha: float,
+    with_lobe: bool,
+) -> Triple:
+    """The shading of one light at one sample: f(wi, wo) max(0, n . wi), per RGB channel.
+
+    The numba form of :func:`brdf` times the cosine, (rho_d / pi + F0 S(wi, wo)) cos(theta_i),
+    that every shading kernel calls (the simulator's camera and ground truth, the per-sample
+    models' relighting; tests hold it equal to :func:`brdf`). Multiplied by a light's
+    irradiance at normal incidence (or radiance x sr), it is the radiance the light reflects
+    toward ``wo``.
+
+    Parameters
+    ----------
+    normal, wi, wo : tuple of 3 floats, unit vectors (light ``wi`` and view ``wo`` point away
+        from the surface)
+    rho_d, f0 : tuple of 3 floats, diffuse albedo and F0, RGB (tuples, not array rows: the
+        kernels' loops then keep them in registers)
+    alpha : float, GGX roughness, > 0 (read only ``with_lobe``)
+    with_lobe : bool
+        False: the diffuse term alone (a Lambertian fit, whose F0 and alpha are not used).
+
+    Returns
+    -------
+    tuple of 3 floats, 1/sr; zero when ``wi`` or ``wo`` is below the surface
+    """
+    cos_i = cosine(normal, wi)
+    cos_o = cosine(normal, wo)
+    if cos_i <= 0.0 or cos_o <= 0.0:
+        return 0.0, 0.0, 0.0
+    if not with_lobe:
+        return (
+            rho_d[0] / math.pi * cos_i,
+            rho_d[1] / math.pi * cos_i,
+            rho_d[2] / math.pi * cos_i,
+        )
+    specular = specular_lobe(cos_i, cos_o, half_vector_cosine(normal, wi, wo), alpha)
+    return (
+        (rho_d[0] / math.pi + f0[0] * specular) * cos_i,
+        (rho_d[1] / math.pi + f0[1] * specular) * cos_i,
+        (rho_d[2] / math.pi + f0[2] * specular) * cos_i,
+    )
+
+
+@numba.njit(cache=True, inline="always")
 def toward_eye(
     points: NDArray[np.float64], p: int, eye: NDArray[np.float64], distant: bool
-) -> tuple[float, float, float]:
+) -> Triple:
     """Unit direction from sample ``p`` toward the eye, for the shading kernels.
 
     ``distant``: ``eye`` is that direction already (a pixel field's camera); else the eye's

@@ -116,6 +116,9 @@ def lobe_width_deg(alpha: float) -> float:
     D(h) falls to half its peak at a half-vector angle t with cos^2 t = (alpha^2 sqrt 2 - 1) /
     (alpha^2 - 1); the reflected light direction turns twice as fast as the half vector, and the
     full width is twice the half width: 4 t.
+
+    A closed form solved from D as :func:`core.brdf.ggx_distribution` defines it (tests hold
+    D at t to half its peak), not a shading: there is no part of the shading sum to call here.
     """
     a2 = alpha * alpha
     if a2 >= 1.0 / math.sqrt(2.0):

@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from core.brdf import specular_lobe, toward_eye
+from core.brdf import cosine, shade_light, toward_eye
 from core.camera_model import PinholeCamera
 from core.colour import REC709_LUMINANCE
 from core.directions import panorama_directions, panorama_pixel_index, rotate_directions_yaw
@@ -288,49 +288,36 @@ def _shade_kernel(
     reaches: NDArray[np.bool_],
     out: NDArray[np.float32],
 ) -> None:
-    # One sample per iteration, every light: the fitted BRDF times the cosine, the
-    # interpolated shadow marks and the light, added to ``out`` (the precomputed lighting
-    # adds its brightest lights to the rest). The sample's own normal, the parameters (and
-    # marks) of its source (itself unless it had no observation).
+    # One sample per iteration, every light: the fitted BRDF times the cosine
+    # (core.brdf.shade_light), the interpolated shadow marks and the light, added to ``out``
+    # (the precomputed lighting adds its brightest lights to the rest). The sample's own
+    # normal, the parameters (and marks) of its source (itself unless it had no observation).
     for j in numba.prange(samples.shape[0]):
         p = samples[j]
         q = source[p]
-        nx, ny, nz = normals[p, 0], normals[p, 1], normals[p, 2]
-        vx, vy, vz = toward_eye(points, p, eye, distant)
-        cos_o = nx * vx + ny * vy + nz * vz
-        if cos_o <= 0.0:
+        normal = (normals[p, 0], normals[p, 1], normals[p, 2])
+        view = toward_eye(points, p, eye, distant)
+        if cosine(normal, view) <= 0.0:
             continue
-        diffuse_r = rho_d[q, 0] / math.pi
-        diffuse_g = rho_d[q, 1] / math.pi
-        diffuse_b = rho_d[q, 2] / math.pi
+        rho = (rho_d[q, 0], rho_d[q, 1], rho_d[q, 2])
+        f = (f0[q, 0], f0[q, 1], f0[q, 2])
         a = alpha[q]
         r = g = b = 0.0
         for d in range(directions.shape[0]):
             if not reaches[d]:
                 continue
-            wx, wy, wz = directions[d, 0], directions[d, 1], directions[d, 2]
-            cos_i = nx * wx + ny * wy + nz * wz
-            if cos_i <= 0.0:
-                continue
+            light = (directions[d, 0], directions[d, 1], directions[d, 2])
+            if cosine(normal, light) <= 0.0:
+                continue  # behind the surface: no need of its shadow marks
             visible = 0.0
             for k in range(vis_indices.shape[1]):
                 visible += vis_weights[d, k] * lit[q, vis_indices[d, k]]
             if visible <= 0.0:
                 continue
-            scale = cos_i * visible
-            if with_lobe:
-                hx, hy, hz = wx + vx, wy + vy, wz + vz
-                cos_h = (nx * hx + ny * hy + nz * hz) / max(
-                    math.sqrt(hx * hx + hy * hy + hz * hz), 1e-300
-                )
-                specular = specular_lobe(cos_i, cos_o, cos_h, a)
-                r += (diffuse_r + f0[q, 0] * specular) * scale * rgb[d, 0]
-                g += (diffuse_g + f0[q, 1] * specular) * scale * rgb[d, 1]
-                b += (diffuse_b + f0[q, 2] * specular) * scale * rgb[d, 2]
-            else:
-                r += diffuse_r * scale * rgb[d, 0]
-                g += diffuse_g * scale * rgb[d, 1]
-                b += diffuse_b * scale * rgb[d, 2]
+            shade = shade_light(normal, light, view, rho, f, a, with_lobe)
+            r += shade[0] * visible * rgb[d, 0]
+            g += shade[1] * visible * rgb[d, 1]
+            b += shade[2] * visible * rgb[d, 2]
         out[p, 0] += r
         out[p, 1] += g
         out[p, 2] += b

@@ -32,7 +32,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from core.brdf import specular_lobe, toward_eye
+from core.brdf import cosine, half_vector_cosine, specular_lobe, toward_eye
 from core.colour import REC709_LUMINANCE
 from core.directions import (
     panorama_bilinear_cell,
@@ -76,6 +76,8 @@ ALBEDO_COSINES = 48
 BLOCK = 512
 #: Grid blocks summed exactly, the most luminous (measured: ``python -m bench.interactive``).
 BRIGHT_LIGHTS = 32
+#: The normal of the frame the lobe's albedo is tabulated in.
+_UP = (0.0, 0.0, 1.0)
 
 
 @lru_cache(maxsize=4)
@@ -190,18 +192,19 @@ def _prefilter(
     out: NDArray[np.float64],
 ) -> None:
     # With n = v = R (the split sum's assumption): each output direction's lobe-weighted mean
-    # radiance sum(S cos E) / sum(S cos omega), for every roughness.
+    # radiance sum(S cos E) / sum(S cos omega), for every roughness. S cos is the specular
+    # part of core.brdf.shade_light (its half-vector cosine and lobe), with cos_o = 1 exactly
+    # (n = v), the half vector's cosine found once for every roughness.
     for o in numba.prange(outputs.shape[0]):
-        rx, ry, rz = outputs[o, 0], outputs[o, 1], outputs[o, 2]
+        mirror = (outputs[o, 0], outputs[o, 1], outputs[o, 2])
         weight = np.zeros(alphas.shape[0])
         light = np.zeros((alphas.shape[0], 3))
         for d in range(directions.shape[0]):
-            cos_i = rx * directions[d, 0] + ry * directions[d, 1] + rz * directions[d, 2]
+            towards = (directions[d, 0], directions[d, 1], directions[d, 2])
+            cos_i = cosine(mirror, towards)
             if cos_i <= 0.0:
                 continue
-            hx, hy, hz = directions[d, 0] + rx, directions[d, 1] + ry, directions[d, 2] + rz
-            length = max(math.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
-            cos_h = (rx * hx + ry * hy + rz * hz) / length
+            cos_h = half_vector_cosine(mirror, towards, mirror)
             for a in range(alphas.shape[0]):
                 w = specular_lobe(cos_i, 1.0, cos_h, alphas[a]) * cos_i
                 weight[a] += w * omega[d]
@@ -265,19 +268,21 @@ def prefilter_panorama(rgb: NDArray[np.floating], bright: int | None = None) -> 
 def _albedo(
     alphas: NDArray[np.float64], cosines: NDArray[np.float64], out: NDArray[np.float64]
 ) -> None:
+    # The specular part of core.brdf.shade_light (its half-vector cosine and lobe) times the
+    # cosine, integrated over the light directions, in the surface's frame: normal +z, the
+    # view in the xz plane.
     rows, cols = 256, 256
     for c in numba.prange(cosines.shape[0]):
         cos_o = cosines[c]
-        sin_o = math.sqrt(max(0.0, 1.0 - cos_o * cos_o))
+        view = (math.sqrt(max(0.0, 1.0 - cos_o * cos_o)), 0.0, cos_o)
         for i in range(rows):
             theta = (i + 0.5) * 0.5 * math.pi / rows
             cos_i, sin_i = math.cos(theta), math.sin(theta)
             omega = sin_i * (0.5 * math.pi / rows) * (2.0 * math.pi / cols)
             for j in range(cols):
                 phi = (j + 0.5) * 2.0 * math.pi / cols
-                wx, wy, wz = sin_i * math.cos(phi), sin_i * math.sin(phi), cos_i
-                hx, hy, hz = wx + sin_o, wy, wz + cos_o
-                cos_h = hz / max(math.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
+                towards = (sin_i * math.cos(phi), sin_i * math.sin(phi), cos_i)
+                cos_h = half_vector_cosine(_UP, towards, view)
                 for a in range(alphas.shape[0]):
                     out[a, c] += specular_lobe(cos_i, cos_o, cos_h, alphas[a]) * cos_i * omega
 
@@ -428,6 +433,12 @@ def shade_precomputed(
     exposure; ``specular`` the pre-filtered maps at yaw 0 (``yaw`` in radians turns the lookup,
     ``exposure`` scales it); ``albedo`` is :func:`lobe_albedo`, ``norms`` :func:`sh_norms`.
     """
+    # Not core.brdf.shade_light per light (there are no lights here): its sum over the grid,
+    # split. The diffuse term is its rho_d / pi times the harmonics' sum of cos V E; the
+    # specular term F0 times the split sum of its lobe times the cosine (the tables of
+    # _prefilter and _albedo, made with its half-vector cosine and lobe), looked up at the
+    # lobe's dominant direction: it differs from the exact sum by the split's approximation
+    # (module doc), measured by bench.interactive.
     bands2 = light_sh.shape[0]
     n_cos = albedo.shape[1]
     height, width = specular.shape[1], specular.shape[2]

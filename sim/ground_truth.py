@@ -16,7 +16,6 @@ The panorama arrives as an array: reading files is the caller's job (``processin
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -24,7 +23,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from core.brdf import specular_lobe
+from core.brdf import cosine, shade_light, toward_eye
 from core.camera_model import PinholeCamera
 from core.light_set import LightSet, grid_lights
 from core.progress import progress_bar
@@ -130,33 +129,27 @@ def _shade(
     use_visibility: bool,
     out: NDArray[np.float64],
 ) -> None:
-    # The model of core.brdf.brdf, evaluated point by point (tests hold the two equal).
+    # The model of core.brdf.brdf times the cosine (core.brdf.shade_light), point by point
+    # (tests hold the two equal).
     for p in numba.prange(points.shape[0]):
-        vx = viewpoint[0] - points[p, 0]
-        vy = viewpoint[1] - points[p, 1]
-        vz = viewpoint[2] - points[p, 2]
-        length = math.sqrt(vx * vx + vy * vy + vz * vz)
-        vx, vy, vz = vx / length, vy / length, vz / length
-        nx, ny, nz = normals[p, 0], normals[p, 1], normals[p, 2]
-        cos_o = nx * vx + ny * vy + nz * vz
-        if cos_o <= 0.0:
+        view = toward_eye(points, p, viewpoint, False)
+        normal = (normals[p, 0], normals[p, 1], normals[p, 2])
+        if cosine(normal, view) <= 0.0:
             continue
+        rho = (rho_d[p, 0], rho_d[p, 1], rho_d[p, 2])
+        f = (f0[p, 0], f0[p, 1], f0[p, 2])
+        a = alpha[p]
         r = g = b = 0.0
         for d in range(directions.shape[0]):
             if use_visibility and not visible[d, p]:
                 continue
-            wx, wy, wz = directions[d, 0], directions[d, 1], directions[d, 2]
-            cos_i = nx * wx + ny * wy + nz * wz
-            if cos_i <= 0.0:
-                continue
-            hx, hy, hz = wx + vx, wy + vy, wz + vz
-            cos_h = (nx * hx + ny * hy + nz * hz) / max(
-                math.sqrt(hx * hx + hy * hy + hz * hz), 1e-300
-            )
-            specular = specular_lobe(cos_i, cos_o, cos_h, alpha[p])
-            r += (rho_d[p, 0] / math.pi + f0[p, 0] * specular) * cos_i * light[d, 0]
-            g += (rho_d[p, 1] / math.pi + f0[p, 1] * specular) * cos_i * light[d, 1]
-            b += (rho_d[p, 2] / math.pi + f0[p, 2] * specular) * cos_i * light[d, 2]
+            towards = (directions[d, 0], directions[d, 1], directions[d, 2])
+            if cosine(normal, towards) <= 0.0:
+                continue  # behind the surface: skipped, not added as 0 (0 x inf light is NaN)
+            shade = shade_light(normal, towards, view, rho, f, a, True)
+            r += shade[0] * light[d, 0]
+            g += shade[1] * light[d, 1]
+            b += shade[2] * light[d, 2]
         out[p, 0] += r
         out[p, 1] += g
         out[p, 2] += b

@@ -14,14 +14,13 @@ points' splats (disks one point spacing wide, so no holes), plus a coverage mask
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from core.brdf import specular_lobe
+from core.brdf import cosine, shade_light, toward_eye
 from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.splat import (
@@ -199,28 +198,22 @@ def _shade_one_light(
     reached: NDArray[np.bool_],
     out: NDArray[np.float64],
 ) -> None:
-    # core.brdf.brdf point by point, times cos(theta_i) and the irradiance (tests hold the
-    # two equal); numpy's temporaries cost more than the arithmetic at 250k points.
+    # core.brdf.brdf times cos(theta_i) (core.brdf.shade_light) point by point, times the
+    # irradiance (tests hold the two equal); numpy's temporaries cost more than the arithmetic
+    # at 250k points.
     for p in numba.prange(points.shape[0]):
         if not reached[p]:
             continue
-        nx, ny, nz = normals[p, 0], normals[p, 1], normals[p, 2]
-        wx, wy, wz = towards[p, 0], towards[p, 1], towards[p, 2]
-        cos_i = nx * wx + ny * wy + nz * wz
-        vx = viewpoint[0] - points[p, 0]
-        vy = viewpoint[1] - points[p, 1]
-        vz = viewpoint[2] - points[p, 2]
-        length = math.sqrt(vx * vx + vy * vy + vz * vz)
-        vx, vy, vz = vx / length, vy / length, vz / length
-        cos_o = nx * vx + ny * vy + nz * vz
-        if cos_i <= 0.0 or cos_o <= 0.0:
-            continue
-        hx, hy, hz = wx + vx, wy + vy, wz + vz
-        cos_h = (nx * hx + ny * hy + nz * hz) / max(math.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
-        specular = specular_lobe(cos_i, cos_o, cos_h, alpha[p])
-        scale = cos_i * irradiance[p]
+        normal = (normals[p, 0], normals[p, 1], normals[p, 2])
+        light = (towards[p, 0], towards[p, 1], towards[p, 2])
+        view = toward_eye(points, p, viewpoint, False)
+        if cosine(normal, light) <= 0.0 or cosine(normal, view) <= 0.0:
+            continue  # unlit or unseen: left 0, not 0 x the irradiance (NaN if infinite)
+        rho = (rho_d[p, 0], rho_d[p, 1], rho_d[p, 2])
+        f = (f0[p, 0], f0[p, 1], f0[p, 2])
+        shade = shade_light(normal, light, view, rho, f, alpha[p], True)
         for c in range(3):
-            out[p, c] = (rho_d[p, c] / math.pi + f0[p, c] * specular) * scale
+            out[p, c] = shade[c] * irradiance[p]
 
 
 def render_under_light(

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from core.brdf import brdf, ggx_distribution, smith_g1, specular_lobe
+from core.brdf import brdf, ggx_distribution, shade_light, smith_g1, specular_lobe
 from core.directions import direction_from_angles_deg, panorama_directions, panorama_solid_angles
 
 UP = np.array([0.0, 0.0, 1.0])
@@ -75,3 +75,27 @@ def test_the_scalar_lobe_is_the_brdfs_specular_part() -> None:
         assert specular_lobe(cos_i, cos_o, cos_h, alpha) == pytest.approx(
             float(expected) / (4.0 * cos_i * cos_o), rel=1e-12
         )
+
+
+@pytest.mark.parametrize("with_lobe", [True, False])
+def test_shade_light_is_the_brdf_times_the_cosine(with_lobe: bool) -> None:
+    # Every shading kernel (simulator, model relighting) calls shade_light: it must be brdf
+    # times max(0, n . wi), below-surface directions included (zero), and the diffuse term
+    # alone without the lobe (F0 = 0).
+    rng = np.random.default_rng(7)
+    count = 400
+    n, wi, wo = rng.normal(size=(3, count, 3))
+    n, wi, wo = (v / np.linalg.norm(v, axis=1, keepdims=True) for v in (n, wi, wo))
+    wi[:40] = n[:40]  # normal incidence, and the view straight on too for some
+    wo[:20] = n[:20]
+    rho, f0 = rng.uniform(0, 1, (2, count, 3))
+    alpha = rng.uniform(0.02, 1.0, count)
+    f0_used = f0 if with_lobe else np.zeros_like(f0)
+    cos_i = np.einsum("pk,pk->p", n, wi)
+    expected = brdf(n, wi, wo, rho, f0_used, alpha) * np.maximum(cos_i, 0.0)[:, None]
+    got = np.zeros((count, 3))
+    for p in range(count):
+        vectors = [(float(v[p, 0]), float(v[p, 1]), float(v[p, 2])) for v in (n, wi, wo, rho, f0)]
+        got[p] = shade_light(*vectors, float(alpha[p]), with_lobe)
+    assert np.any(got == 0.0) and np.any(got > 0.0)  # both sides of the surface were drawn
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-300)

@@ -1,10 +1,12 @@
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from core.brdf import ggx_distribution
 from core.camera_model import PinholeCamera
 from core.directions import hemisphere_layout, panorama_directions
 from core.field_store import FieldStoreWriter, ReflectanceField
@@ -39,6 +41,16 @@ def test_lobe_width_of_ggx() -> None:
     assert lobe_width_deg(0.2) == pytest.approx(4 * 7.55, abs=0.1)
     assert lobe_width_deg(0.05) < lobe_width_deg(0.2) < lobe_width_deg(0.5)
     assert lobe_width_deg(0.95) == 180.0
+
+
+@pytest.mark.parametrize("alpha", [0.03, 0.1, 0.2, 0.4, 0.8])
+def test_lobe_width_is_the_half_maximum_of_the_brdfs_distribution(alpha: float) -> None:
+    # The closed form in guards and core.brdf's D: a quarter of the width is the half-vector
+    # angle where D falls to half its peak.
+    half_vector_angle = math.radians(lobe_width_deg(alpha) / 4.0)
+    assert float(ggx_distribution(math.cos(half_vector_angle), alpha)) == pytest.approx(
+        0.5 * float(ggx_distribution(1.0, alpha)), rel=1e-9
+    )
 
 
 @pytest.mark.parametrize(
