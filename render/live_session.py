@@ -31,6 +31,7 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.splat import require_outside
 from processing.environment import EnvironmentLighting
+from processing.image_quality import relative_rmse_values
 from processing.panorama import Panorama
 from processing.sampling import SAMPLERS, SamplerName
 from render.model_relight import ModelRelighter, ModelRelightSettings
@@ -248,9 +249,7 @@ def error_picture(
     grey = np.where(coverage, np.round(level * 255.0), 0).astype(np.uint8)
     picture = cv2.applyColorMap(grey, cv2.COLORMAP_INFERNO)[:, :, ::-1]
     picture[~coverage] = 0
-    energy = float(np.mean(b[coverage] ** 2))
-    rmse = math.sqrt(float(np.mean((a[coverage] - b[coverage]) ** 2)) / max(energy, 1e-30))
-    return np.ascontiguousarray(picture), rmse
+    return np.ascontiguousarray(picture), relative_rmse_values(a, b, coverage)
 
 
 @dataclass
