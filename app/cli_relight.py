@@ -153,7 +153,7 @@ def _relight_field(
     from core.splat import require_outside
     from render.output import IMAGE_SUFFIXES, write_image, write_sequence
     from render.relighting import (
-        LightingControls,
+        PanoramaControls,
         RelightRequest,
         prepare_relighting,
         relighting_notes,
@@ -179,7 +179,7 @@ def _relight_field(
     if suffix not in IMAGE_SUFFIXES:
         if args.sequence == "turntable" and field.sample_kind == "pixels":
             raise RigError(f"{args.field} holds one fixed view: use --sequence environment")
-    lighting = LightingControls(yaw_deg=args.yaw, exposure=args.exposure, modulation=modulation)
+    lighting = PanoramaControls(yaw_deg=args.yaw, exposure=args.exposure, modulation=modulation)
     request = RelightRequest(
         panorama=panorama, camera=camera, lighting=lighting, mode=_mode_request(args)
     )

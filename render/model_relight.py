@@ -58,7 +58,7 @@ from core.light_set import LightSet
 from core.point_spacing import point_spacing
 from processing.environment import EnvironmentLighting, LightingControls, light_environment
 from processing.interpolation import interpolation_weights
-from processing.panorama import Panorama, VisibleEnvironments
+from processing.panorama import Panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import (
     BasisFit,
@@ -72,6 +72,7 @@ from processing.sample_models import (
     with_geometric_visibility,
 )
 from processing.sampling import SamplerName
+from render.engine_lighting import PanoramaLitEngine
 from render.field_view import FieldView
 from render.precomputed_lighting import (
     ALPHAS,
@@ -438,7 +439,7 @@ class ModelRelightSettings:
         )
 
 
-class ModelRelighter:
+class ModelRelighter(PanoramaLitEngine):
     """Relight one field through its fitted models under changing lightings and views.
 
     Parameters
@@ -448,6 +449,8 @@ class ModelRelighter:
     models : SampleModels, optional; fitted here (:func:`fit_sample_models`) when None
     """
 
+    settings: ModelRelightSettings
+
     def __init__(
         self,
         field_store: ReflectanceField,
@@ -455,7 +458,7 @@ class ModelRelighter:
         models: SampleModels | None = None,
     ) -> None:
         self.field = field_store
-        self._visible = VisibleEnvironments(field_store.below_horizon)
+        super().__init__(field_store)
         self.settings = settings or ModelRelightSettings()
         self.models = models if models is not None else fit_sample_models(field_store)
         if self.models.sample_count != field_store.shape[2]:
@@ -535,26 +538,13 @@ class ModelRelighter:
             self._environment = light_environment(*self._shown)
         return self._environment
 
-    def set_lighting(
-        self,
-        panorama: Panorama,
-        *,
-        yaw_deg: float = 0.0,
-        exposure: float = 1.0,
-        modulation: NDArray[np.floating] | None = None,
-    ) -> float:
-        """Light with a panorama under the user's controls; returns the seconds it took."""
-        start = time.perf_counter()
-        controls = self.settings.lighting_controls(
-            yaw_deg=yaw_deg, exposure=exposure, modulation=modulation
-        )
-        panorama = self._visible(panorama)
+    def take_panorama(self, panorama: Panorama, controls: LightingControls) -> None:
+        """The precomputed lighting turns its pre-filtered panorama; the others sum lights."""
         if self.settings.lighting == "precomputed":
-            self._precompute(self._prefiltered(panorama), yaw_deg, exposure)
+            self._precompute(self._prefiltered(panorama), controls.yaw_deg, controls.exposure)
             self._environment, self._shown = None, (panorama, controls)
         else:
             self.set_environment(light_environment(panorama, controls))
-        return time.perf_counter() - start
 
     def set_environment(self, lighting: EnvironmentLighting) -> None:
         """Prepare the lights of a lighting (from :func:`light_environment`)."""

@@ -31,10 +31,10 @@ from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
-from processing.environment import EnvironmentLighting, LightingControls, light_environment
+from processing.environment import EnvironmentLighting, LightingControls
 from processing.measured_region import MeasuredRegion
-from processing.panorama import Panorama, VisibleEnvironments
 from processing.sample_models import SampleModels
+from render.engine_lighting import PanoramaLitEngine
 from render.field_view import FieldView
 from render.light_prediction import (
     PREDICTORS,
@@ -118,8 +118,10 @@ class PredictorRelightSettings:
         return PredictorRelighter(field_store, self, models)
 
 
-class PredictorRelighter:
+class PredictorRelighter(PanoramaLitEngine):
     """Relight one field of pixels through a light predictor under changing panoramas."""
+
+    settings: PredictorRelightSettings
 
     def __init__(
         self,
@@ -134,11 +136,11 @@ class PredictorRelighter:
                 "pixels (one fixed view)"
             )
         self.field = field_store
+        super().__init__(field_store)
         self.settings = settings
         self.predictor: LightPredictor = make_predictor(
             field_store, settings.method, models=models, progress=settings.progress
         )
-        self._visible = VisibleEnvironments(field_store.below_horizon)
         self._environment: EnvironmentLighting | None = None
         self._lights: LightSet | None = None
         self._radiance: NDArray[np.float32] | None = None
@@ -149,22 +151,6 @@ class PredictorRelighter:
     def environment(self) -> EnvironmentLighting | None:
         """The current lighting: the panorama as relit and its grid lights."""
         return self._environment
-
-    def set_lighting(
-        self,
-        panorama: Panorama,
-        *,
-        yaw_deg: float = 0.0,
-        exposure: float = 1.0,
-        modulation: NDArray[np.floating] | None = None,
-    ) -> float:
-        """Light with a panorama under the user's controls; returns the seconds it took."""
-        start = time.perf_counter()
-        controls = self.settings.lighting_controls(
-            yaw_deg=yaw_deg, exposure=exposure, modulation=modulation
-        )
-        self.set_environment(light_environment(self._visible(panorama), controls))
-        return time.perf_counter() - start
 
     def set_environment(self, lighting: EnvironmentLighting) -> None:
         """Take the grid lights of a lighting (from :func:`light_environment`)."""

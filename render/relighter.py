@@ -21,11 +21,11 @@ from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
-from processing.environment import EnvironmentLighting, LightingControls, light_environment
+from processing.environment import EnvironmentLighting, LightingControls
 from processing.interpolation import InterpolationMethod, OutsidePolicy
-from processing.panorama import Panorama, VisibleEnvironments
 from processing.sample_models import SampleModels
 from processing.sampling import SamplerName
+from render.engine_lighting import PanoramaLitEngine
 from render.field_view import FieldView
 from render.light_weights import (
     LightWeights,
@@ -195,13 +195,15 @@ class RelitImage:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
-class Relighter:
+class Relighter(PanoramaLitEngine):
     """Relight one field under changing lightings and views."""
+
+    settings: RelightSettings
 
     def __init__(self, field_store: ReflectanceField, settings: RelightSettings | None = None):
         self.field = field_store
+        super().__init__(field_store)
         self.settings = settings or RelightSettings()
-        self._visible = VisibleEnvironments(field_store.below_horizon)
         self._lighting: LightWeights | None = None
         self._environment: EnvironmentLighting | None = None
         self._view: tuple[ViewBlend, FieldView] | None = None
@@ -225,22 +227,6 @@ class Relighter:
     def environment(self) -> EnvironmentLighting | None:
         """The current lighting: the panorama as relit (yaw, exposure) and its lights."""
         return self._environment
-
-    def set_lighting(
-        self,
-        panorama: Panorama,
-        *,
-        yaw_deg: float = 0.0,
-        exposure: float = 1.0,
-        modulation: NDArray[np.floating] | None = None,
-    ) -> float:
-        """Light with a panorama under the user's controls; returns the seconds it took."""
-        start = time.perf_counter()
-        controls = self.settings.lighting_controls(
-            yaw_deg=yaw_deg, exposure=exposure, modulation=modulation
-        )
-        self.set_environment(light_environment(self._visible(panorama), controls))
-        return time.perf_counter() - start
 
     def set_environment(self, lighting: EnvironmentLighting) -> None:
         """Compute the light weights of a lighting (from :func:`light_environment`)."""

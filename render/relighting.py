@@ -2,7 +2,7 @@
 
 Every program that relights a field under an environment (``rig relight``, ``rig batch``, the
 demo and its simulated capture, the live viewer's warnings) states what it wants as data, a
-:class:`RelightRequest`: the panorama and its controls (:class:`LightingControls`), the view,
+:class:`RelightRequest`: the panorama and its controls (:class:`PanoramaControls`), the view,
 and either a mode or what the user asked of one (:class:`ModeRequest`, resolved by
 :func:`choose_mode`). :func:`prepare_relighting` resolves the mode, measures the warnings once
 on the panorama as the object sees it and opens the engine; :func:`relight_request` renders the
@@ -46,8 +46,8 @@ from render.relighter import RelightSettings, RelitImage, Scheme
 
 __all__ = [
     "ChosenMode",
-    "LightingControls",
     "ModeRequest",
+    "PanoramaControls",
     "PreparedRelighting",
     "RelightRequest",
     "Relit",
@@ -63,7 +63,7 @@ OUTSIDE_NOTE = 0.05
 
 
 @dataclass(frozen=True, kw_only=True)
-class LightingControls:
+class PanoramaControls:
     """The user's controls on a panorama.
 
     Attributes
@@ -169,7 +169,7 @@ def choose_mode(
     field : ReflectanceField
     request : ModeRequest
     seen : Panorama or None, the panorama as the object sees it
-        (:meth:`LightingControls.as_seen`); a field of pixels' automatic choice is made under
+        (:meth:`PanoramaControls.as_seen`); a field of pixels' automatic choice is made under
         it. None (several panoramas, as ``rig batch``): the choice on held-out lights alone.
     models : SampleModels, optional, the field's fit when the caller has it (else read from
         ``request.models_path`` or beside the field, or fitted, as the mode needs)
@@ -260,13 +260,13 @@ class RelightRequest:
     ----------
     panorama : Panorama, as read (the controls are applied by the relighting)
     camera : PinholeCamera, the view (a field of pixels: its capture's camera)
-    lighting : LightingControls
+    lighting : PanoramaControls
     mode : RelightMode, or a ModeRequest the relighting resolves (:func:`choose_mode`)
     """
 
     panorama: Panorama
     camera: PinholeCamera
-    lighting: LightingControls = field(default_factory=LightingControls)
+    lighting: PanoramaControls = field(default_factory=PanoramaControls)
     mode: RelightMode | ModeRequest = field(default_factory=ModeRequest)
 
 

@@ -16,8 +16,8 @@ from render.environment_choice import choose_environment_mode
 from render.relight_mode import MOST_ACCURATE_MODELS, most_accurate_mode, open_relighter
 from render.relighter import RelightSettings
 from render.relighting import (
-    LightingControls,
     ModeRequest,
+    PanoramaControls,
     RelightRequest,
     choose_mode,
     prepare_relighting,
@@ -43,7 +43,7 @@ def test_a_given_mode_relights_as_its_engine_does(
     panorama = read_panorama(courtyard_path)
     camera = PinholeCamera(10.0, 40.0, width=32, height=32)
     mode = RelightSettings.paper_configuration(k=16)
-    controls = LightingControls(yaw_deg=30.0, exposure=2.0)
+    controls = PanoramaControls(yaw_deg=30.0, exposure=2.0)
     relit = relight_request(
         glossy, RelightRequest(panorama=panorama, camera=camera, lighting=controls, mode=mode)
     )
@@ -60,7 +60,7 @@ def test_the_panorama_is_judged_as_the_object_sees_it(
     glossy: ReflectanceField, courtyard_path: Path
 ) -> None:
     panorama = read_panorama(courtyard_path)
-    controls = LightingControls(yaw_deg=90.0, exposure=0.5)
+    controls = PanoramaControls(yaw_deg=90.0, exposure=0.5)
     prepared = prepare_relighting(
         glossy,
         RelightRequest(
