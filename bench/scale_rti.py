@@ -339,8 +339,10 @@ def measure_size(megapixels: float, args: argparse.Namespace, work: Path) -> dic
     pixels = width * height
     name = f"{width}x{height}"
     capture, store = work / f"capture-{name}", work / f"{name}.zarr"
-    for stale in (store, work / f"web-{name}"):
-        shutil.rmtree(stale, ignore_errors=True)
+    # A run without the import stage goes on from the store (and fit) an earlier run left.
+    stale = (store, work / f"web-{name}") if "import" in args.stages else (work / f"web-{name}",)
+    for path in stale:
+        shutil.rmtree(path, ignore_errors=True)
     lp = capture / "dirs.lp"
     made: dict[str, Any] | None = None
     reused = args.reuse and lp.is_file()
