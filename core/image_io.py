@@ -2,8 +2,10 @@
 
 Readers return the stored values (:func:`read_pixels`: uint8, uint16 or float32, RGB channel
 order, alpha dropped, grey kept as (H, W)) or linear float32 (:func:`read_linear`: integers
-scaled to [0, 1] and decoded through a transfer curve). Every write is atomic
-(:func:`core.atomic.atomic_path`): a file named by the project is never seen half-written.
+scaled to [0, 1] and decoded through a transfer curve). Every file is encoded in memory and
+written by :func:`core.atomic.write_bytes_atomic`: checked (a full disk is an error, not a cut
+file) and atomic (a file named by the project is never seen half-written, an earlier one stays
+until the new one is complete).
 
 Transfer curves. ``"srgb"`` and ``"linear"`` say how integers encode light; ``"auto"`` chooses
 by the pixel type (:func:`auto_transfer`): 8-bit values are sRGB, 16-bit and float values are
@@ -63,7 +65,7 @@ import tifffile
 from numpy.typing import NDArray
 from PIL import Image, UnidentifiedImageError
 
-from core.atomic import atomic_path
+from core.atomic import write_bytes_atomic
 from core.colour import linear_to_srgb, srgb_to_linear
 from core.errors import InputError
 
@@ -413,8 +415,22 @@ def _check_picture(path: Path, picture: NDArray[Any], dtype: type[np.generic]) -
 
 
 def _imwrite(path: Path, bgr: NDArray[Any], params: list[int] | None = None) -> None:
-    if not cv2.imwrite(str(path), np.ascontiguousarray(bgr), params or []):
-        raise ImageFileError(f"{path}: OpenCV could not write the image")
+    """Encode ``bgr`` by ``path``'s suffix in memory and write the bytes, checked and atomic.
+
+    Not ``cv2.imwrite``: it reports success on a full disk, leaving a cut or empty file.
+    """
+    with _library_output() as printed:
+        ok, encoded = cv2.imencode(path.suffix.lower(), np.ascontiguousarray(bgr), params or [])
+    if not ok:  # some codecs (Radiance) encode through a temporary file: a full disk fails here
+        said = _opencv_said(printed)
+        raise ImageFileError(
+            f"{path}: cannot write: OpenCV could not encode the image"
+            + (f" ({said})" if said else "")
+            + "; is the disk full? Nothing was replaced"
+        )
+    for line in printed:
+        print(line, file=sys.stderr)
+    write_bytes_atomic(path, encoded.tobytes())
 
 
 def write_exr(
@@ -433,8 +449,10 @@ def write_exr(
             )
         channels["A"] = coverage
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with atomic_path(path) as temporary, OpenEXR.File(header, channels) as exr:
-        exr.write(str(temporary))
+    buffer = io.BytesIO()
+    with OpenEXR.File(header, channels) as exr:
+        exr.write(buffer)  # in memory: the file itself is written checked
+    write_bytes_atomic(path, buffer.getvalue())
 
 
 def write_linear(
@@ -455,13 +473,12 @@ def write_linear(
         raise ImageFileError(f"{file}: cannot write {suffix!r}; use .exr, .hdr or .png")
     if not np.isfinite(image).all():
         raise ImageFileError(f"{file}: the image holds NaN or infinite values; nothing written")
-    with atomic_path(file) as temporary:
-        if suffix == ".png":
-            scale = 255.0 if bits == 8 else 65535.0
-            encoded = np.round(linear_to_srgb(image) * scale)
-            _imwrite(temporary, encoded.astype(np.uint8 if bits == 8 else np.uint16)[:, :, ::-1])
-        else:
-            _imwrite(temporary, image[:, :, ::-1])
+    if suffix == ".png":
+        scale = 255.0 if bits == 8 else 65535.0
+        encoded = np.round(linear_to_srgb(image) * scale)
+        _imwrite(file, encoded.astype(np.uint8 if bits == 8 else np.uint16)[:, :, ::-1])
+    else:
+        _imwrite(file, image[:, :, ::-1])
 
 
 def write_srgb8(
@@ -504,8 +521,7 @@ def write_uint8(
         params = [cv2.IMWRITE_JPEG_QUALITY, int(quality)]
         if full_chroma:
             params += [cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444]
-    with atomic_path(target) as temporary:
-        _imwrite(temporary, picture[:, :, ::-1], params)
+    _imwrite(target, picture[:, :, ::-1], params)
 
 
 def write_png16(path: str | os.PathLike[str], picture: NDArray[np.uint16]) -> None:
@@ -517,16 +533,16 @@ def write_png16(path: str | os.PathLike[str], picture: NDArray[np.uint16]) -> No
     _check_picture(target, picture, np.uint16)
     if target.suffix.lower() != ".png":
         raise ImageFileError(f"{target}: 16-bit values are written as .png, not {target.suffix!r}")
-    with atomic_path(target) as temporary:
-        _imwrite(temporary, picture[:, :, ::-1])
+    _imwrite(target, picture[:, :, ::-1])
 
 
 def write_linear16_tiff(path: str | os.PathLike[str], picture: NDArray[np.uint16]) -> None:
     """Write an (H, W, 3) uint16 linear RGB picture as an uncompressed TIFF."""
     target = Path(path)
     _check_picture(target, picture, np.uint16)
-    with atomic_path(target) as temporary:
-        tifffile.imwrite(temporary, picture, photometric="rgb", metadata=None)
+    buffer = io.BytesIO()
+    tifffile.imwrite(buffer, picture, photometric="rgb", metadata=None)
+    write_bytes_atomic(target, buffer.getvalue())
 
 
 def encode_picture(

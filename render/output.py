@@ -11,10 +11,11 @@ from pathlib import Path
 from typing import Any
 
 import imageio.v2 as imageio
+import imageio_ffmpeg  # type: ignore[import-untyped]
 import numpy as np
 from numpy.typing import NDArray
 
-from core.atomic import atomic_path
+from core.atomic import atomic_path, write_bytes_atomic
 from core.errors import InputError
 from core.image_io import write_exr, write_srgb8
 from render.tonemap import auto_exposure, tone_mapped_8bit
@@ -68,12 +69,39 @@ def write_sequence(
         raise InputError(f"{target}: write a sequence as {' or '.join(SEQUENCE_SUFFIXES)}")
     if not frames:
         raise InputError(f"{target}: a sequence needs at least one frame")
+    if suffix == ".gif":
+        # Encoded in memory, the file written checked (Pillow's own writing leaves a cut file
+        # and a second error when the disk is full).
+        encoded = imageio.mimwrite(
+            "<bytes>", list[Any](frames), format="GIF", duration=1000.0 / fps, loop=0
+        )
+        write_bytes_atomic(target, encoded)
+        return
+    # H.264 wants even sizes; pad by one black row/column where needed.
+    height, width = frames[0].shape[:2]
+    pad = ((0, height % 2), (0, width % 2), (0, 0))
+    padded: list[Any] = [np.pad(frame, pad) for frame in frames]
     with atomic_path(target) as temporary:
-        if suffix == ".gif":
-            imageio.mimwrite(temporary, list[Any](frames), duration=1000.0 / fps, loop=0)
-        else:
-            # H.264 wants even sizes; pad by one black row/column where needed.
-            height, width = frames[0].shape[:2]
-            pad = ((0, height % 2), (0, width % 2), (0, 0))
-            padded: list[Any] = [np.pad(frame, pad) for frame in frames]
-            imageio.mimwrite(temporary, padded, fps=fps, macro_block_size=1, format="FFMPEG")
+        imageio.mimwrite(temporary, padded, fps=fps, macro_block_size=1, format="FFMPEG")
+        _check_video(target, temporary, len(padded))
+
+
+def _check_video(target: Path, written: Path, count: int) -> None:
+    """Read the video ``written`` back: ffmpeg's failed writes (a full disk) are not reported.
+
+    imageio ignores ffmpeg's exit status, so a video cut short by the disk looks written; a
+    video that does not decode, or holds fewer frames, is an InputError naming ``target``.
+    """
+    try:
+        frames, _ = imageio_ffmpeg.count_frames_and_secs(str(written))
+    except (RuntimeError, OSError) as error:
+        last = str(error).strip().splitlines()[-1:] or [""]
+        raise InputError(
+            f"{target}: cannot write: the video written does not decode ({last[0]}); is the "
+            "disk full? Nothing was replaced"
+        ) from None
+    if frames != count:
+        raise InputError(
+            f"{target}: cannot write: the video written holds {frames} of {count} frames; is the "
+            "disk full? Nothing was replaced"
+        )

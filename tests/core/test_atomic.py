@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 from pathlib import Path
@@ -11,7 +12,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from core.atomic import atomic_path, write_json_atomic
+from core.atomic import atomic_path, output_problem, write_json_atomic
+from core.errors import InputError
+from tests.full_disk import writes_under_limit
 
 
 def test_the_target_appears_only_when_the_block_succeeds(tmp_path: Path) -> None:
@@ -66,9 +69,114 @@ def test_missing_parent_folders_are_created(tmp_path: Path) -> None:
 
 def test_a_block_that_writes_nothing_creates_no_target(tmp_path: Path) -> None:
     target = tmp_path / "never.json"
-    with pytest.raises(OSError), atomic_path(target):
+    with (
+        pytest.raises(InputError, match=f"{target}: the writer wrote no file"),
+        atomic_path(target),
+    ):
         pass
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_os_error_in_the_block_names_the_target_and_keeps_the_old_file(tmp_path: Path) -> None:
+    target = tmp_path / "r.png"
+    target.write_bytes(b"the previous picture")
+    with pytest.raises(InputError) as raised, atomic_path(target) as temporary:
+        temporary.write_bytes(b"half")
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    assert str(raised.value) == (
+        f"{target}: cannot write: no space left on the device; free some space or choose "
+        "another place (the earlier file is kept as it was)"
+    )
+    assert target.read_bytes() == b"the previous picture"
+    assert [p.name for p in tmp_path.iterdir()] == ["r.png"]
+
+
+# --- a full disk, for real: a child process under a file size limit (tests/full_disk.py) -----
+
+
+def test_a_write_past_the_file_size_limit_keeps_the_old_file(tmp_path: Path) -> None:
+    document = tmp_path / "doc.json"
+    blob = tmp_path / "blob.bin"
+    write_json_atomic(document, {"version": 1})
+    blob.write_bytes(b"old")
+    found = writes_under_limit(
+        f"""
+from core.atomic import write_bytes_atomic, write_json_atomic
+attempt("json", lambda: write_json_atomic({str(document)!r}, list(range(5000))))
+attempt("bytes", lambda: write_bytes_atomic({str(blob)!r}, bytes(100_000)))
+attempt("new", lambda: write_bytes_atomic({str(tmp_path / "new.bin")!r}, bytes(100_000)))
+""",
+        limit=4096,
+    )
+    for name, target in (("json", document), ("bytes", blob)):
+        assert found[name]["project"], found[name]["traceback"]
+        assert found[name]["message"] == (
+            f"{target}: cannot write: the file is larger than this process may write (a file "
+            "size limit) (the earlier file is kept as it was)"
+        )
+    assert found["new"]["message"].endswith("(nothing was written)")
+    assert json.loads(document.read_text()) == {"version": 1}
+    assert blob.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blob.bin", "doc.json"]
+
+
+@settings(max_examples=12, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(size=st.integers(0, 3000), limit=st.integers(0, 3000))
+def test_a_write_succeeds_whole_or_fails_leaving_the_old_file(
+    tmp_path: Path, size: int, limit: int
+) -> None:
+    target = tmp_path / "data.bin"
+    target.write_bytes(b"old")
+    data = bytes(range(256)) * (size // 256) + bytes(size % 256)
+    found = writes_under_limit(
+        f"""
+from core.atomic import write_bytes_atomic
+attempt("write", lambda: write_bytes_atomic({str(target)!r}, {data!r}))
+""",
+        limit=limit,
+    )["write"]
+    if size <= limit:
+        assert found["error"] is None, found["traceback"]
+        assert target.read_bytes() == data
+    else:
+        assert found["project"] and "cannot write" in found["message"], found["traceback"]
+        assert target.read_bytes() == b"old"
+    assert [p.name for p in tmp_path.iterdir()] == ["data.bin"]
+
+
+# --- outputs that cannot be named --------------------------------------------------------
+
+
+def test_a_name_longer_than_the_file_system_allows_is_refused(tmp_path: Path) -> None:
+    target = tmp_path / ("a" * 256 + ".png")
+    assert output_problem(target) == (
+        f"{target}: the name {'a' * 24}... is 260 bytes long, the file system allows 255; "
+        "choose a shorter name"
+    )
+    with pytest.raises(InputError, match="choose a shorter name"), atomic_path(target):
+        pass
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_long_name_within_the_limit_is_written(tmp_path: Path) -> None:
+    # Its temporary name (".NAME.PID.partial.png") would be too long: it is shortened.
+    target = tmp_path / ("b" * 251 + ".png")
+    with atomic_path(target) as temporary:
+        assert len(temporary.name) <= 255 and temporary.suffix == ".png"
+        temporary.write_bytes(b"x")
+    assert target.read_bytes() == b"x"
+
+
+@pytest.mark.parametrize("where", ["loop/r.png", "loop", "deep/loop/x/r.png"])
+def test_a_loop_of_symbolic_links_is_refused(tmp_path: Path, where: str) -> None:
+    (tmp_path / "loop").symlink_to("loop")
+    (tmp_path / "deep").mkdir()
+    (tmp_path / "deep" / "loop").symlink_to("loop")
+    target = tmp_path / where
+    problem = output_problem(target)
+    assert problem is not None and problem.startswith(f"{target}: the path runs through a loop")
+    with pytest.raises(InputError, match="loop of symbolic links"), atomic_path(target):
+        pass
 
 
 def test_write_json_atomic_writes_indented_json_with_a_final_newline(tmp_path: Path) -> None:

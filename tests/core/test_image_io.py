@@ -36,6 +36,7 @@ from core.image_io import (
     write_linear16_tiff,
     write_srgb8,
 )
+from tests.full_disk import writes_under_limit
 
 EXR_HEADER = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
 
@@ -633,3 +634,44 @@ def test_broken_bmp_files_are_refused_in_one_line(
     (tmp_path / "folder.bmp").mkdir()
     with pytest.raises(ImageFileError, match=r"folder\.bmp: is a directory"):
         read_pixels(tmp_path / "folder.bmp")
+
+
+# --- a full disk, for real: a child process under a file size limit (tests/full_disk.py) -----
+
+#: Each writer, called in the child on a 64 x 64 picture of noise (far past the limit).
+_WRITERS = {
+    "exr": "write_exr(target, linear)",
+    "hdr": "write_linear(target, linear)",
+    "png": "write_linear(target, linear, bits=16)",
+    "jpg": "write_srgb8(target, picture)",
+    "tif": "write_linear16_tiff(target, picture.astype(np.uint16) * 257)",
+    "png8": "write_uint8(target, picture)",
+    "png16": "write_png16(target, picture.astype(np.uint16) * 257)",
+}
+
+
+def test_every_writer_refuses_a_full_disk_and_keeps_the_old_file(tmp_path: Path) -> None:
+    # OpenCV's imwrite reported success on a full disk and left an empty or cut file in place.
+    targets = {kind: tmp_path / f"old-{kind}.{kind.rstrip('0123456789')}" for kind in _WRITERS}
+    for target in targets.values():
+        target.write_bytes(b"the previous image")
+    calls = "\n".join(
+        f"target = {str(targets[kind])!r}\nattempt({kind!r}, lambda target=target: {call})"
+        for kind, call in _WRITERS.items()
+    )
+    found = writes_under_limit(
+        "import numpy as np\n"
+        "from core.image_io import (write_exr, write_linear, write_linear16_tiff, write_png16,\n"
+        "    write_srgb8, write_uint8)\n"
+        "linear = np.random.default_rng(0).random((64, 64, 3)).astype(np.float32)\n"
+        "picture = (linear * 255).astype(np.uint8)\n" + calls,
+        limit=1000,
+    )
+    for kind, target in targets.items():
+        assert found[kind]["project"], found[kind]["traceback"]
+        # Radiance files are encoded through a temporary file of OpenCV's: that write fails.
+        said = "OpenCV could not encode" if kind == "hdr" else "the file is larger"
+        assert found[kind]["message"].startswith(f"{target}: cannot write: {said}")
+        assert target.read_bytes() == b"the previous image"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(t.name for t in targets.values())
+    assert found["stderr"]["text"] == ""  # no library's own complaint besides the error

@@ -23,6 +23,7 @@ from render.output import (
     write_image,
     write_sequence,
 )
+from tests.full_disk import writes_under_limit
 
 
 def _code(linear_display: float) -> int:
@@ -174,3 +175,37 @@ def test_a_sequence_of_another_suffix_is_refused(tmp_path: Path, name: str) -> N
     with pytest.raises(InputError, match=re.escape(f"{target}: write a sequence as .gif or .mp4")):
         write_sequence(target, _frames(4, 4))
     assert _only(tmp_path) == []
+
+
+# -- a full disk, for real: a child process under a file size limit (tests/full_disk.py) --------
+
+
+def test_every_output_refuses_a_full_disk_and_keeps_the_old_file(tmp_path: Path) -> None:
+    # A full disk emptied r.png with exit 0 (OpenCV's imwrite) and cut an MP4 (ffmpeg's exit
+    # status is not read by imageio): each is now an error naming the file, the old one kept.
+    names = ("r.png", "r.exr", "turn.gif", "turn.mp4")
+    for name in names:
+        (tmp_path / name).write_bytes(b"the previous output")
+    found = writes_under_limit(
+        f"""
+import numpy as np
+from render.output import write_image, write_sequence
+folder = {str(tmp_path)!r}
+rng = np.random.default_rng(1)
+rgb = rng.random((96, 96, 3)).astype(np.float32)
+coverage = np.ones((96, 96), bool)
+frames = [(rng.random((96, 96, 3)) * 255).astype(np.uint8) for _ in range(6)]
+attempt("r.png", lambda: write_image(folder + "/r.png", rgb, coverage))
+attempt("r.exr", lambda: write_image(folder + "/r.exr", rgb, coverage))
+attempt("turn.gif", lambda: write_sequence(folder + "/turn.gif", frames))
+attempt("turn.mp4", lambda: write_sequence(folder + "/turn.mp4", frames))
+""",
+        limit=2000,
+    )
+    for name in names:
+        assert found[name]["project"], found[name]["traceback"]
+        assert found[name]["message"].startswith(f"{tmp_path / name}: cannot write: ")
+        assert (tmp_path / name).read_bytes() == b"the previous output"
+    assert "nothing was replaced" in found["turn.mp4"]["message"].lower()
+    assert _only(tmp_path) == sorted(names)
+    assert "Traceback" not in found["stderr"]["text"]
