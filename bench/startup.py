@@ -8,7 +8,7 @@ median, max) and its peak resident memory (``wait4``), beside the bare interpret
 (``python -c pass``) for scale, and writes ``DIR/startup.json`` and prints the table.
 
 The command line imports the library (numpy, numba, zarr: seconds) only in the handlers, so
-a help is the interpreter and argparse; ``tests/app/test_cli_startup.py`` holds that import
+a help is the interpreter and argparse; ``tests/app/cli/test_startup.py`` holds that import
 structure, this measures what it buys. Not a test: nothing is asserted about time. On a
 loaded machine the spread is wide: quote the median.
 """

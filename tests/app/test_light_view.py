@@ -22,7 +22,7 @@ import pytest
 
 from app import light_view, live_server
 from app.cli import main
-from app.cli_view import open_session
+from app.cli.view import open_session
 from app.live_server import PendingSession, ViewerServer, start_viewer
 from core.camera_model import PinholeCamera, camera_to_rig, rig_to_camera
 from core.colour import luminance

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from app.cli import main
-from app.cli_view import open_session
+from app.cli.view import open_session
 from app.live_server import ViewerServer, start_viewer
 from core.colour import luminance
 from core.field_store import ReflectanceField

@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from app.cli_bench import add_bench_parser
+from app.cli.bench import add_bench_parser
 from bench.report import CHARTS, pareto_front, write_report
 from bench.suite import SuiteConfig, run_suite
 from bench.suite_results import (

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from app.cli import main
-from app.cli_calibrate import add_calibrate
-from app.cli_process import add_process
+from app.cli.calibrate import add_calibrate
+from app.cli.process import add_process
 from capture.dataset import Dataset
 from core.camera_model import RigCamera
 from core.directions import direction_from_angles_deg

@@ -27,7 +27,7 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from app.cli_export import add_export_web
+from app.cli.export import add_export_web
 from core.camera_model import PinholeCamera, camera_to_rig
 from core.colour import linear_to_srgb
 from core.directions import hemisphere_layout

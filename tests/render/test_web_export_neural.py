@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 import pytest
 
-from app.cli_export import add_export_web
+from app.cli.export import add_export_web
 from core.camera_model import rig_to_camera
 from core.field_store import ReflectanceField
 from core.sample_data import rti_capture_path

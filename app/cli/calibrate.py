@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import positive, squares
+from app.cli.args import positive, squares
 from core.errors import InputError
 
 __all__ = ["add_calibrate"]

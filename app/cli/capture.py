@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import count, image_size, output_directory, positive
+from app.cli.args import count, image_size, output_directory, positive
 from core.errors import InputError
 
 __all__ = ["add_capture", "console_fault_handler", "console_placer"]

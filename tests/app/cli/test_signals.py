@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).parents[2]
+ROOT = Path(__file__).parents[3]
 RTI = ROOT / "core" / "data" / "rti" / "loewenkopf"
 #: Seconds allowed for a stage on a loaded 2-core machine (a bound on a hang, not a timing).
 PATIENCE_S = 300.0

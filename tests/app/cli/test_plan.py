@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from app.cli_plan import add_plan, format_duration
+from app.cli.plan import add_plan, format_duration
 from capture.plan_file import load_plan
 from core.errors import InputError
 from rig.config import simulated_config

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import (
+from app.cli.args import (
     add_dask_options,
     cluster_for,
     count,

@@ -1,8 +1,8 @@
 """``rig view``: relight a field live in the browser.
 
-Application layer (like ``app/cli.py``): it opens the field, chooses its best mode, builds the
-session (:class:`render.live_session.LiveSession`, with the simulator's ground truth for a
-simulated field) and serves it (:mod:`app.live_server`) until interrupted.
+Application layer (like the rest of :mod:`app.cli`): it opens the field, chooses its best mode,
+builds the session (:class:`render.live_session.LiveSession`, with the simulator's ground truth
+for a simulated field) and serves it (:mod:`app.live_server`) until interrupted.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import image_size, whole
-from app.cli_evaluate import add_below_horizon_option, add_transfer_option
+from app.cli.args import image_size, whole
+from app.cli.evaluate import add_below_horizon_option, add_transfer_option
 
 __all__ = ["add_view", "open_session", "read_panoramas"]
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.cli_process import add_process
+from app.cli.process import add_process
 from capture.dataset import Dataset, ImageKey
 from core.errors import DatasetError, InputError
 from core.field_store import ReflectanceField

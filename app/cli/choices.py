@@ -3,7 +3,7 @@
 ``rig --help`` and every sub-command's ``--help`` must answer at once, and the modules that own
 these names (:mod:`processing.sampling`, :mod:`render.light_prediction`, ...) import numpy,
 numba and zarr, seconds of start-up on a loaded machine. So the parsers take them from here,
-a module of literals, and ``tests/app/test_cli_startup.py`` checks each against its owner: a
+a module of literals, and ``tests/app/cli/test_startup.py`` checks each against its owner: a
 name added to the library and not here fails that test rather than going unoffered.
 """
 

@@ -3,7 +3,7 @@
 Application layer: maps the flags to a relighting mode (the choice under the panorama for a
 field of pixels, :mod:`render.environment_choice`; the models or interpolation for a field of
 points, :mod:`render.relight_mode`), prints the guards' warnings and writes the image or the
-sequence. ``--lights`` is :func:`app.cli_evaluate.relight_lights`.
+sequence. ``--lights`` is :func:`app.cli.evaluate.relight_lights`.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import (
+from app.cli.args import (
     DEFAULT_VIEW_SIZE,
     add_camera_options,
     angles,
@@ -23,7 +23,7 @@ from app.cli_args import (
     resampled_size,
     whole,
 )
-from app.cli_choices import (
+from app.cli.choices import (
     INTERPOLATIONS,
     MODEL_GRID_HEIGHT,
     MODELS,
@@ -31,7 +31,7 @@ from app.cli_choices import (
     SAMPLERS,
     SCHEMES,
 )
-from app.cli_evaluate import (
+from app.cli.evaluate import (
     add_below_horizon_option,
     add_transfer_option,
     relight_lights,

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 from app.cli import main
-from app.cli_args import resampled_size
-from app.cli_evaluate import resample
+from app.cli.args import resampled_size
+from app.cli.evaluate import resample
 from core.errors import InputError
 from core.image_io import read_pixels
 
-RTI = Path(__file__).parents[2] / "core" / "data" / "rti" / "loewenkopf"
+RTI = Path(__file__).parents[3] / "core" / "data" / "rti" / "loewenkopf"
 #: The bundled capture's size (width, height).
 NATIVE = (64, 43)
 
@@ -59,9 +59,7 @@ def test_relight_refuses_a_size_of_other_proportions(
     assert not (tmp_path / "square.png").exists()
 
 
-def test_relight_lights_resamples_too(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_relight_lights_resamples_too(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     lp = tmp_path / "one.lp"
     lp.write_text("1\nlit.jpg 0.3 0.2 0.93\n")
     out = tmp_path / "lit"

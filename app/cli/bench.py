@@ -1,6 +1,6 @@
 """``rig bench``: the speed-against-accuracy benchmark of relighting, and the product's speed.
 
-Application layer (like ``app/cli.py``): it runs :mod:`bench.suite`, which writes
+Application layer (like the rest of :mod:`app.cli`): it runs :mod:`bench.suite`, which writes
 ``DIR/results.json``, the charts and ``DIR/REPORT.md``.
 """
 
@@ -17,7 +17,7 @@ def add_bench_parser(commands: argparse._SubParsersAction[argparse.ArgumentParse
 
     The options are :func:`bench.suite.add_arguments`' written out here: that module imports
     the whole suite (numpy, numba, OpenCV), seconds that every ``rig --help`` would pay.
-    ``tests/app/test_cli_startup.py`` checks the two parsers offer the same options.
+    ``tests/app/cli/test_startup.py`` checks the two parsers offer the same options.
     """
     p = commands.add_parser(
         "bench",

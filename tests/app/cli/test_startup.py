@@ -5,7 +5,7 @@ imported: numpy, numba, zarr and the library packages take seconds to import on 
 machine, so they belong in the handlers (``_run_*``), never at a module's top or in a
 parser's registration. The check is structural, not timed (the time is a benchmark's:
 ``python -m bench.startup``). The names the parsers offer as choices come from
-:mod:`app.cli_choices`, checked here against the modules that own them.
+:mod:`app.cli.choices`, checked here against the modules that own them.
 """
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ from pathlib import Path
 
 import pytest
 
-from app import cli_choices
 from app.cli import build_parser
+from app.cli import choices as cli_choices
 
-ROOT = Path(__file__).parents[2]
+ROOT = Path(__file__).parents[3]
 
 #: Third-party modules too slow to import for a help text.
 HEAVY_LIBRARIES = (
@@ -90,7 +90,7 @@ def test_every_help_is_printed_without_importing_the_library() -> None:
     assert not at_help, (
         f"rig --help imported {', '.join(at_help)} ({', '.join(at_import) or 'none'} of them at "
         "the import of app.cli, the others while the parsers were built): import them in the "
-        "command's handler (_run_*), and take choices from app.cli_choices"
+        "command's handler (_run_*), and take choices from app.cli.choices"
     )
 
 
@@ -137,7 +137,7 @@ def _options(parser: argparse.ArgumentParser) -> list[tuple[object, ...]]:
 
 
 def test_rig_bench_offers_the_suites_options() -> None:
-    from app.cli_bench import add_bench_parser
+    from app.cli.bench import add_bench_parser
     from bench.suite import add_arguments
 
     rig = argparse.ArgumentParser(prog="rig")

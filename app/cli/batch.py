@@ -12,7 +12,7 @@ import sys
 import time
 from pathlib import Path
 
-from app.cli_args import (
+from app.cli.args import (
     add_dask_options,
     add_memory_option,
     angles,
@@ -22,7 +22,7 @@ from app.cli_args import (
     output_directory,
     positive,
 )
-from app.cli_choices import SEQUENCES
+from app.cli.choices import SEQUENCES
 from core.errors import InputError
 
 __all__ = ["add_batch"]

@@ -1,130 +1,31 @@
-"""The ``rig`` command line: thin sub-commands over library functions.
+"""The simulated world's commands: ``rig sim scenes``, ``render``, ``photo``, ``field``, ``rti``.
 
-This module and :mod:`app.demo` are the application layer: they may import every package
-(lazily, so ``rig --help`` stays fast); the library packages keep to the boundaries of
-``docs/architecture.md``.
+Application layer: parses and calls the simulator (:mod:`sim.scenes`, :mod:`sim.ground_truth`,
+:mod:`sim.synthetic_camera`, :mod:`sim.field`, :mod:`sim.rti_capture`, and the path-traced
+worlds of :mod:`sim.world.mitsuba`); ``rig sim start`` is :mod:`app.cli.rig`'s.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
-import signal
-import sys
-import threading
-from collections.abc import Iterator, Sequence
 from pathlib import Path
-from types import FrameType
 
-from app.cli_advise import add_advise
-from app.cli_args import (
+from app.cli.args import (
     add_camera_options,
     angles,
     count,
-    finite,
     image_size,
     output_directory,
     output_file,
     positive,
     whole,
 )
-from app.cli_batch import add_batch
-from app.cli_bench import add_bench_parser
-from app.cli_calibrate import add_calibrate
-from app.cli_capture import add_capture
-from app.cli_choices import SAMPLERS
-from app.cli_evaluate import add_evaluate
-from app.cli_export import add_export_web
-from app.cli_fit import add_fit
-from app.cli_plan import add_plan
-from app.cli_process import add_process
-from app.cli_relight import add_relight
-from app.cli_rig import add_doctor, add_sim_start
-from app.cli_view import add_view
+from app.cli.rig import add_sim_start
 from core.errors import InputError, RigError
 
-__all__ = ["build_parser", "main"]
 
-
-def _add_sample(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = commands.add_parser(
-        "sample",
-        help="importance-sample a panorama and disassemble its light into K lights",
-        description="Sample an equirectangular panorama into K light directions, gather all its "
-        "light into their spherical Voronoi cells, and write lights.json, overlay.png and "
-        "lights.png to the output directory.",
-    )
-    p.add_argument("panorama", type=Path, help="panorama file (.exr, .hdr, .png, .jpg)")
-    p.add_argument("-k", type=count, default=64, help="number of lights (default 64)")
-    p.add_argument("--method", choices=SAMPLERS, default="tmed", help="sampler (default tmed)")
-    p.add_argument("--seed", type=whole, default=0, help="random seed (default 0)")
-    p.add_argument(
-        "--exact",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="return exactly K samples (default on)",
-    )
-    p.add_argument(
-        "--paper", action="store_true", help="diffuse plain pixel luminance, as the paper"
-    )
-    p.add_argument("--modulation", type=Path, help="image multiplying the sampling density")
-    p.add_argument("--yaw", type=finite, default=0.0, help="rotate the environment, degrees CCW")
-    p.add_argument("--exposure", type=positive, default=1.0, help="radiance scale (default 1)")
-    p.add_argument("--resample", action="store_true", help="resize a panorama that is not 2:1")
-    p.add_argument("-o", "--output", type=output_directory, required=True, help="output directory")
-    p.set_defaults(handler=_run_sample)
-
-
-def _run_sample(args: argparse.Namespace) -> int:
-    from processing.environment import LightingControls, read_modulation_map
-    from processing.panorama import read_panorama
-    from render.lighting_outputs import write_lighting_outputs
-
-    panorama = read_panorama(args.panorama, resample=args.resample)
-    if panorama.note:
-        print(panorama.note)
-    controls = LightingControls(
-        k=args.k,
-        method=args.method,
-        seed=args.seed,
-        exact=args.exact,
-        paper=args.paper,
-        modulation=None if args.modulation is None else read_modulation_map(args.modulation),
-        yaw_deg=args.yaw,
-        exposure=args.exposure,
-    )
-    lighting = write_lighting_outputs(panorama, controls, args.output, progress=True)
-    lights = lighting.light_set()
-    print(
-        f"{lights.k} lights ({controls.method}) from {panorama.source} "
-        f"({panorama.width}x{panorama.height}); total light "
-        f"{lights.rgb.sum(axis=0).round(4).tolist()} (RGB radiance x sr) -> {args.output}/"
-    )
-    return 0
-
-
-def _add_demo(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = commands.add_parser(
-        "demo",
-        help="run the demonstration pipeline and write its pictures",
-        description="Run the demonstration on the bundled panorama and write pictures and a "
-        "report to the output directory.",
-    )
-    p.add_argument("-o", "--output", type=output_directory, default=Path("demo-out"),
-                   help="output directory")  # fmt: skip
-    p.add_argument("--quick", action="store_true", help="small fields (a smoke test)")
-    p.set_defaults(handler=_run_demo)
-
-
-def _run_demo(args: argparse.Namespace) -> int:
-    from app.demo import run_demo
-
-    report = run_demo(args.output, quick=args.quick)
-    print(f"demo written to {args.output}/ (see {report})")
-    return 0
-
-
-def _add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+def add_sim(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``rig sim`` and its sub-commands on the ``rig`` sub-command parser."""
     p = commands.add_parser("sim", help="the simulated world: scenes, ground truth, fields")
     sim_commands = p.add_subparsers(dest="sim_command", required=True, metavar="SIM_COMMAND")
     scenes = sim_commands.add_parser(
@@ -424,92 +325,3 @@ def _run_sim_scenes(args: argparse.Namespace) -> int:
         if "texture" in material:
             print(f"  texture:  {material['texture']}")
     return 0
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The ``rig`` argument parser with every sub-command."""
-    parser = argparse.ArgumentParser(
-        prog="rig",
-        description="Reflectance-field capture rig and controllable image-based relighting.",
-    )
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    _add_sample(commands)
-    _add_demo(commands)
-    add_relight(commands)
-    add_view(commands)
-    add_export_web(commands)
-    add_doctor(commands)
-    add_plan(commands)
-    add_advise(commands)
-    add_evaluate(commands)
-    add_fit(commands)
-    add_batch(commands)
-    add_bench_parser(commands)
-    add_capture(commands)
-    add_calibrate(commands)
-    add_process(commands)
-    _add_sim(commands)
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``rig`` console script; returns the exit status.
-
-    A bad argument is refused by argparse (its message, status 2) and returned as the
-    status, like every other refusal, rather than leaving by ``SystemExit``. Ctrl-C and
-    SIGTERM both unwind the command (see :func:`_unwind_on_sigterm`): what it created is
-    removed, a line on stderr says it was stopped, and the status is the shell's convention,
-    128 + the signal's number (130, 143), unless the command handles the stop itself (``rig
-    view``, ``rig capture``) and returns its own.
-    """
-    try:
-        args = build_parser().parse_args(argv)
-    except SystemExit as leaving:  # argparse's error (2) and --help (0)
-        return leaving.code if isinstance(leaving.code, int) else 2
-    with _unwind_on_sigterm() as received:
-        try:
-            status: int = args.handler(args)
-        except RigError as error:
-            print(f"rig {args.command}: error: {error}", file=sys.stderr)
-            return 2
-        except KeyboardInterrupt:
-            number = received[-1] if received else signal.SIGINT
-            word = "terminated" if number == signal.SIGTERM else "interrupted"
-            print(f"rig {args.command}: {word}", file=sys.stderr)
-            return 128 + number
-    return status
-
-
-@contextlib.contextmanager
-def _unwind_on_sigterm() -> Iterator[list[int]]:
-    """SIGTERM raises :class:`KeyboardInterrupt` in the main thread while the block runs.
-
-    By default SIGTERM ends the process where it stands: no ``finally`` or ``with`` runs, so
-    a temporary field store (an RTI capture's import), the viewer's uploads or a half-written
-    output would stay behind. Raised as Ctrl-C is, it unwinds through the same cleanups and
-    the same ``except KeyboardInterrupt`` of the commands that catch it. Yields the list the
-    signals received are appended to, so the caller can tell SIGTERM from Ctrl-C. Another
-    SIGTERM during that unwinding is ignored: a supervisor repeating its request must not cut
-    the cleanup short (SIGKILL is the way to not wait).
-    """
-    received: list[int] = []
-
-    def terminate(number: int, frame: FrameType | None) -> None:
-        received.append(number)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        raise KeyboardInterrupt
-
-    if threading.current_thread() is not threading.main_thread():
-        # A signal handler can only be set from the main thread (a test calling main()
-        # from a worker): SIGTERM keeps its default there.
-        yield received
-        return
-    previous = signal.signal(signal.SIGTERM, terminate)
-    try:
-        yield received
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

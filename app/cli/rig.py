@@ -8,7 +8,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import output_file, positive
+from app.cli.args import output_file, positive
 
 __all__ = ["add_doctor", "add_sim_start"]
 

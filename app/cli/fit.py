@@ -12,14 +12,14 @@ import sys
 import time
 from pathlib import Path
 
-from app.cli_args import (
+from app.cli.args import (
     add_dask_options,
     add_memory_option,
     cluster_for,
     names_among,
     output_file,
 )
-from app.cli_choices import MODELS
+from app.cli.choices import MODELS
 
 __all__ = ["add_fit"]
 

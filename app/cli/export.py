@@ -2,7 +2,7 @@
 
 Application layer: parses, opens the field (a store or an RTI capture) and calls
 :func:`render.web_export.export.export_web` (the format: ``docs/web-export.md``). The parser
-takes its choices and defaults from :mod:`app.cli_choices` (help answers without the library);
+takes its choices and defaults from :mod:`app.cli.choices` (help answers without the library);
 the library is imported when the command runs.
 """
 
@@ -12,8 +12,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from app.cli_args import count, names_among, output_directory, positive, quality, whole
-from app.cli_evaluate import add_transfer_option
+from app.cli.args import count, names_among, output_directory, positive, quality, whole
+from app.cli.evaluate import add_transfer_option
 
 __all__ = ["add_export_web"]
 
@@ -27,10 +27,10 @@ PNG_UNTILED = (
 
 def add_export_web(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``rig export-web FIELD -o DIR`` on the ``rig`` sub-command parser."""
-    from app.cli_choices import WEB_MODELS
-    from app.cli_choices import WEB_NEURAL_SECONDS as NEURAL_SECONDS
-    from app.cli_choices import WEB_TILE_SIZE as TILE_SIZE
-    from app.cli_choices import WEB_TILE_THRESHOLD as TILE_THRESHOLD
+    from app.cli.choices import WEB_MODELS
+    from app.cli.choices import WEB_NEURAL_SECONDS as NEURAL_SECONDS
+    from app.cli.choices import WEB_TILE_SIZE as TILE_SIZE
+    from app.cli.choices import WEB_TILE_THRESHOLD as TILE_THRESHOLD
 
     p = commands.add_parser(
         "export-web",
@@ -94,7 +94,7 @@ def add_export_web(commands: argparse._SubParsersAction[argparse.ArgumentParser]
 
 
 def _models(text: str) -> tuple[str, ...]:
-    from app.cli_choices import WEB_MODELS
+    from app.cli.choices import WEB_MODELS
 
     return names_among(text, WEB_MODELS, "model")
 

@@ -1,6 +1,6 @@
 """``rig advise``: the cheapest relighting of a field within an error tolerance.
 
-Application layer (like ``app/cli.py``); the predictions are :mod:`render.advisor`'s.
+Application layer (like the rest of :mod:`app.cli`); the predictions are :mod:`render.advisor`'s.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from app.cli_args import count, output_file, positive
+from app.cli.args import count, output_file, positive
 
 if TYPE_CHECKING:
     from render.advisor import Advice

@@ -1,7 +1,7 @@
 """``rig plan``: the dry run of a sweep plan on a rig config (counts, duration, limits).
 
-Application layer (like ``app/cli.py``): it reads a plan of :mod:`capture.plan` and moves
-nothing.
+Application layer (like the rest of :mod:`app.cli`): it reads a plan of :mod:`capture.plan`
+and moves nothing.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ def add_plan(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         "one, and each axis' range against its limits. Moves nothing. Exits 0 when the plan "
         "can run, 2 when a camera or light pose lies outside the limits.",
     )
-    from app.cli_advise import add_advisor_options
+    from app.cli.advise import add_advisor_options
 
     p.add_argument("--config", type=Path, help="rig config (TOML)")
     p.add_argument("--plan", type=Path, help="sweep plan (TOML); not with --advise")
@@ -158,7 +158,7 @@ def _run_plan(args: argparse.Namespace) -> int:
 
 def _advise_density(args: argparse.Namespace) -> int:
     """``rig plan --advise``: the density a pre-capture suggests, dry-run on a rig if given."""
-    from app.cli_advise import run_advisor
+    from app.cli.advise import run_advisor
     from capture.grid_plan import grid_plan
     from core.errors import InputError
     from render.advisor import capture_density

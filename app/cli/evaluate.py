@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from app.cli_args import (
+from app.cli.args import (
     add_dask_options,
     cluster_for,
     names_among,
@@ -20,7 +20,7 @@ from app.cli_args import (
     require_output,
     resampled_size,
 )
-from app.cli_choices import CHOSEN, PREDICTORS, SPLITS
+from app.cli.choices import CHOSEN, PREDICTORS, SPLITS
 from core.errors import InputError
 
 __all__ = [

@@ -1,0 +1,128 @@
+"""The ``rig`` command line: thin sub-commands over library functions.
+
+This package and :mod:`app.demo` are the application layer: they may import every package
+(lazily, so ``rig --help`` stays fast); the library packages keep to the boundaries of
+``docs/architecture.md``. Here are the parser and :func:`main`; each command family has its
+module (its parser and its handler): :mod:`app.cli.sample`, :mod:`app.cli.demo`,
+:mod:`app.cli.relight`, :mod:`app.cli.view`, :mod:`app.cli.export`, :mod:`app.cli.rig`
+(``doctor``, ``sim start``), :mod:`app.cli.plan`, :mod:`app.cli.advise`,
+:mod:`app.cli.evaluate`, :mod:`app.cli.fit`, :mod:`app.cli.batch`, :mod:`app.cli.bench`,
+:mod:`app.cli.capture` (``capture``, ``verify``, ``export-lp``), :mod:`app.cli.calibrate`,
+:mod:`app.cli.process` and :mod:`app.cli.sim`; the argument types are :mod:`app.cli.args` and
+the names offered as choices :mod:`app.cli.choices`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import signal
+import sys
+import threading
+from collections.abc import Iterator, Sequence
+from types import FrameType
+
+from app.cli.advise import add_advise
+from app.cli.batch import add_batch
+from app.cli.bench import add_bench_parser
+from app.cli.calibrate import add_calibrate
+from app.cli.capture import add_capture
+from app.cli.demo import add_demo
+from app.cli.evaluate import add_evaluate
+from app.cli.export import add_export_web
+from app.cli.fit import add_fit
+from app.cli.plan import add_plan
+from app.cli.process import add_process
+from app.cli.relight import add_relight
+from app.cli.rig import add_doctor
+from app.cli.sample import add_sample
+from app.cli.sim import add_sim
+from app.cli.view import add_view
+from core.errors import RigError
+
+__all__ = ["build_parser", "main"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``rig`` argument parser with every sub-command."""
+    parser = argparse.ArgumentParser(
+        prog="rig",
+        description="Reflectance-field capture rig and controllable image-based relighting.",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_sample(commands)
+    add_demo(commands)
+    add_relight(commands)
+    add_view(commands)
+    add_export_web(commands)
+    add_doctor(commands)
+    add_plan(commands)
+    add_advise(commands)
+    add_evaluate(commands)
+    add_fit(commands)
+    add_batch(commands)
+    add_bench_parser(commands)
+    add_capture(commands)
+    add_calibrate(commands)
+    add_process(commands)
+    add_sim(commands)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``rig`` console script; returns the exit status.
+
+    A bad argument is refused by argparse (its message, status 2) and returned as the
+    status, like every other refusal, rather than leaving by ``SystemExit``. Ctrl-C and
+    SIGTERM both unwind the command (see :func:`_unwind_on_sigterm`): what it created is
+    removed, a line on stderr says it was stopped, and the status is the shell's convention,
+    128 + the signal's number (130, 143), unless the command handles the stop itself (``rig
+    view``, ``rig capture``) and returns its own.
+    """
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as leaving:  # argparse's error (2) and --help (0)
+        return leaving.code if isinstance(leaving.code, int) else 2
+    with _unwind_on_sigterm() as received:
+        try:
+            status: int = args.handler(args)
+        except RigError as error:
+            print(f"rig {args.command}: error: {error}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            number = received[-1] if received else signal.SIGINT
+            word = "terminated" if number == signal.SIGTERM else "interrupted"
+            print(f"rig {args.command}: {word}", file=sys.stderr)
+            return 128 + number
+    return status
+
+
+@contextlib.contextmanager
+def _unwind_on_sigterm() -> Iterator[list[int]]:
+    """SIGTERM raises :class:`KeyboardInterrupt` in the main thread while the block runs.
+
+    By default SIGTERM ends the process where it stands: no ``finally`` or ``with`` runs, so
+    a temporary field store (an RTI capture's import), the viewer's uploads or a half-written
+    output would stay behind. Raised as Ctrl-C is, it unwinds through the same cleanups and
+    the same ``except KeyboardInterrupt`` of the commands that catch it. Yields the list the
+    signals received are appended to, so the caller can tell SIGTERM from Ctrl-C. Another
+    SIGTERM during that unwinding is ignored: a supervisor repeating its request must not cut
+    the cleanup short (SIGKILL is the way to not wait).
+    """
+    received: list[int] = []
+
+    def terminate(number: int, frame: FrameType | None) -> None:
+        received.append(number)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise KeyboardInterrupt
+
+    if threading.current_thread() is not threading.main_thread():
+        # A signal handler can only be set from the main thread (a test calling main()
+        # from a worker): SIGTERM keeps its default there.
+        yield received
+        return
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield received
+    finally:
+        signal.signal(signal.SIGTERM, previous)
