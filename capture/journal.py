@@ -51,6 +51,7 @@ __all__ = [
     "completed_images",
     "config_digest",
     "last_run_status",
+    "parse_json",
     "read_journal",
     "runs",
 ]
@@ -61,6 +62,11 @@ log = logging.getLogger(__name__)
 JOURNAL_NAME = "journal.jsonl"
 #: Version of the document layout, written in every start document.
 JOURNAL_VERSION = 1
+
+#: Deepest nesting a dataset's JSON may hold (a manifest's records, rig config and plan are
+#: a few levels deep): a deeper document is not one this tool wrote, and would break the code
+#: that walks it (Python's recursion limit) well after it was read.
+MAX_JSON_DEPTH = 32
 
 ImageKind = Literal["light", "dark", "calibration"]
 IMAGE_KINDS: tuple[str, ...] = get_args(ImageKind)
@@ -260,6 +266,36 @@ def _check_document(document: object, where: str, open_run: str | None) -> dict[
     return document
 
 
+def parse_json(text: str | bytes, where: str) -> Any:
+    """The JSON document ``text`` of a dataset's file, ``where`` naming the file and line.
+
+    The one parser of the manifest and the journal. A document nested deeper than
+    :data:`MAX_JSON_DEPTH` (200,000 brackets exhausted Python's recursion) is a DatasetError
+    naming ``where``; text that is not JSON raises ``ValueError`` (a ``JSONDecodeError``, or
+    ``UnicodeDecodeError`` for bytes) for the caller to report in its words.
+    """
+    try:
+        document = json.loads(text)
+    except RecursionError:
+        raise DatasetError(
+            f"{where}: JSON nested too deeply to read (more than {MAX_JSON_DEPTH} levels); "
+            "this is not a file this tool wrote"
+        ) from None
+    pending: list[tuple[Any, int]] = [(document, 0)]
+    while pending:
+        value, depth = pending.pop()
+        if not isinstance(value, dict | list):
+            continue
+        if depth >= MAX_JSON_DEPTH:
+            raise DatasetError(
+                f"{where}: JSON nested more than {MAX_JSON_DEPTH} levels deep; this is not a "
+                "file this tool wrote"
+            )
+        children = value.values() if isinstance(value, dict) else value
+        pending.extend((child, depth + 1) for child in children)
+    return document
+
+
 def read_journal(path: str | os.PathLike[str]) -> JournalContents:
     """Read a journal.
 
@@ -299,8 +335,8 @@ def read_journal(path: str | os.PathLike[str]) -> JournalContents:
     for number, chunk in enumerate(complete, 1):
         where = f"{file}, line {number}"
         try:
-            document = json.loads(chunk.decode("utf-8"))
-        except (UnicodeDecodeError, ValueError) as error:
+            document = parse_json(chunk.decode("utf-8"), where)
+        except ValueError as error:  # not JSON, or not UTF-8
             if number == len(complete) and truncated is None:
                 truncated = TruncatedLine(number, offset, _preview(chunk))
                 break

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
-from capture.journal import ImageKey
+from capture.journal import ImageKey, parse_json
 from core.errors import DatasetError, InputError
 
 __all__ = [
@@ -300,11 +300,13 @@ def read_manifest(manifest: Path) -> dict[str, Any]:
     except (OSError, UnicodeDecodeError) as error:
         raise DatasetError(f"{manifest}: cannot read: {error}") from None
     try:
-        document = json.loads(text)
+        document = parse_json(text, str(manifest))
     except json.JSONDecodeError as error:
         raise DatasetError(
             f"{manifest}, line {error.lineno} column {error.colno}: not valid JSON ({error.msg})"
         ) from None
+    except ValueError as error:  # a number of more digits than Python converts
+        raise DatasetError(f"{manifest}: not valid JSON ({error})") from None
     if not isinstance(document, dict):
         raise DatasetError(f"{manifest}: expected a JSON object, got {type(document).__name__}")
     # The version first: another version may have other fields.

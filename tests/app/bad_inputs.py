@@ -330,6 +330,23 @@ def garbage_manifest(workspace: Workspace, tmp: Path) -> None:
     (_copy_dataset(workspace, tmp) / "manifest.json").write_text("{ not json")
 
 
+#: Brackets of the deep JSON cases: far past Python's recursion limit.
+DEEP = 200_000
+
+
+def deep_manifest(workspace: Workspace, tmp: Path) -> None:
+    """A dataset whose manifest is a list nested :data:`DEEP` levels deep."""
+    (_copy_dataset(workspace, tmp) / "manifest.json").write_text("[" * DEEP + "]" * DEEP)
+
+
+def deep_journal_line(workspace: Workspace, tmp: Path) -> None:
+    """A dataset whose journal's second line holds a list nested :data:`DEEP` levels deep."""
+    journal = _copy_dataset(workspace, tmp) / "journal.jsonl"
+    lines = journal.read_text().splitlines(keepends=True)
+    lines[1] = '{"type": ' + "[" * DEEP + "]" * DEEP + "}\n"
+    journal.write_text("".join(lines))
+
+
 def garbage_models(workspace: Workspace, tmp: Path) -> None:
     """A copy of the field with a model fit beside it that is not an npz file."""
     store = _copy_field(workspace, tmp)
@@ -743,6 +760,18 @@ def _cases() -> list[Case]:
             prepare=garbage_manifest,
         ),
         Case(
+            "verify: a manifest nested 200,000 deep",
+            ("verify", "{tmp}/dataset"),
+            ("manifest.json", "JSON nested too deeply"),
+            prepare=deep_manifest,
+        ),
+        Case(
+            "verify: a journal line nested 200,000 deep",
+            ("verify", "{tmp}/dataset"),
+            ("journal.jsonl, line 2", "JSON nested too deeply"),
+            prepare=deep_journal_line,
+        ),
+        Case(
             "verify: a store missing a chunk",
             ("verify", "{tmp}/field.zarr", "--quiet"),
             ("missing", "camera 0 light 0"),
@@ -781,6 +810,12 @@ def _cases() -> list[Case]:
         ),
         Case("process: a cut image", process, ("corrupt",), prepare=corrupt_image),
         Case("process: an emptied journal", process, ("journal",), prepare=empty_journal),
+        Case(
+            "process: a journal line nested 200,000 deep",
+            process,
+            ("journal.jsonl, line 2", "JSON nested too deeply"),
+            prepare=deep_journal_line,
+        ),
         Case(
             "process: an existing output",
             ("process", "{dataset}", "-o", "{tmp}/field.zarr"),
@@ -872,6 +907,18 @@ def _cases() -> list[Case]:
             ("capture", "--resume", "{tmp}/dataset"),
             ("journal",),
             prepare=empty_journal,
+        ),
+        Case(
+            "capture: --resume a manifest nested 200,000 deep",
+            ("capture", "--resume", "{tmp}/dataset", "--quiet"),
+            ("manifest.json", "JSON nested too deeply"),
+            prepare=deep_manifest,
+        ),
+        Case(
+            "capture: --resume a journal line nested 200,000 deep",
+            ("capture", "--resume", "{tmp}/dataset", "--quiet"),
+            ("journal.jsonl, line 2", "JSON nested too deeply"),
+            prepare=deep_journal_line,
         ),
         Case(
             "capture: --resume another config",

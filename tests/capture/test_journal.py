@@ -14,13 +14,17 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from capture.dataset import Dataset, ImageKey
 from capture.journal import (
+    MAX_JSON_DEPTH,
     Journal,
     completed_images,
     config_digest,
     last_run_status,
+    parse_json,
     read_journal,
     runs,
 )
@@ -189,6 +193,39 @@ def test_corrupt_line_before_the_last_is_an_error(case: CorruptCase, tmp_path: P
     assert case.words in str(raised.value)
     with pytest.raises(DatasetError):
         Journal(path)  # never append to a corrupt journal
+
+
+def _nested(kinds: list[bool], leaf: str = "1") -> str:
+    """JSON text of containers nested ``len(kinds)`` deep: a list (True) or an object."""
+    opening = "".join("[" if is_list else '{"k": ' for is_list in kinds)
+    closing = "".join("]" if is_list else "}" for is_list in reversed(kinds))
+    return opening + leaf + closing
+
+
+@given(
+    kinds=st.lists(st.booleans(), max_size=MAX_JSON_DEPTH + 4)
+    | st.builds(lambda n, k: [k] * n, st.sampled_from([999, 5_000, 200_000]), st.booleans())
+)
+def test_json_deeper_than_the_limit_is_refused_by_name_never_a_recursion_error(
+    kinds: list[bool],
+) -> None:
+    text = _nested(kinds)
+    if len(kinds) <= MAX_JSON_DEPTH:
+        assert parse_json(text, "f.json") == json.loads(text)
+    else:
+        with pytest.raises(DatasetError, match=r"^f\.json, line 7: JSON nested "):
+            parse_json(text, "f.json, line 7")
+
+
+@pytest.mark.parametrize("line", [2, 5])  # an event in the middle, the last line (the stop)
+def test_a_journal_line_nested_200000_deep_is_named(tmp_path: Path, line: int) -> None:
+    path = _journal(tmp_path / "journal.jsonl")
+    lines = path.read_bytes().splitlines(keepends=True)
+    assert len(lines) == 5
+    lines[line - 1] = b'{"type": ' + _nested([True] * 200_000).encode() + b"}\n"
+    path.write_bytes(b"".join(lines))
+    with pytest.raises(DatasetError, match=rf"{path}, line {line}: JSON nested too deeply"):
+        read_journal(path)
 
 
 def test_missing_journal(tmp_path: Path) -> None:
