@@ -15,16 +15,18 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import replace
 from types import TracebackType
 
 from core.errors import DeviceError, InputError, RigError, SafetyError
+from core.exclusive_lock import ExclusiveLock
 from rig.config import XM430_W350, AxisConfig, RigConfig
 from rig.devices import Camera, Frame, LightState, close_after
 from rig.dynamixel import DynamixelChain, ServoAxisConfig
 from rig.grbl import GantryAxes, GantryAxisConfig, GrblGantry
 from rig.motion_time import trapezoid_s
+from rig.port_lock import port_lock
 from rig.pose import RigPose
 from rig.safety import check_path, check_pose, escape_violation, pose_violation
 
@@ -79,6 +81,7 @@ class ServoArm:
         if config.servos is None:
             raise InputError("the rig config has no [servos] section")
         self._axes = config.axes_of("dynamixel")
+        self._lock = port_lock(config.servos.port)
         self.chain = DynamixelChain(
             config.servos.port,
             config.servos.baudrate,
@@ -91,8 +94,9 @@ class ServoArm:
         return tuple(self._axes)
 
     def connect(self) -> None:
-        """Open the servo chain's port, check and configure every servo, torque on."""
-        self.chain.connect()
+        """Lock and open the servo chain's port, check and configure every servo, torque on."""
+        with _locked_while_failing(self._lock):
+            self.chain.connect()
 
     def move_to_deg(self, targets: Mapping[str, float]) -> None:
         """Start a synchronised move of some servos to ``{role: degrees}``; returns at once."""
@@ -137,8 +141,11 @@ class ServoArm:
         )
 
     def close(self) -> None:
-        """Switch torque off on every servo and close the port."""
-        self.chain.close()
+        """Switch torque off on every servo and close the port (then give back its lock)."""
+        try:
+            self.chain.close()
+        finally:
+            self._lock.release()
 
 
 class LightGantry:
@@ -158,6 +165,7 @@ class LightGantry:
         self._azimuth, self._inclination = axes["light_azimuth"], axes["light_inclination"]
         self.homing = gantry.homing
         self.settle_s = config.light.settle_s
+        self._lock = port_lock(gantry.port)
         self.gantry = GrblGantry(
             gantry.port,
             gantry.baudrate,
@@ -182,7 +190,8 @@ class LightGantry:
             GRBL is locked in alarm and the config neither homes nor unlocks it: nothing of the
             rig can move until an operator decides how.
         """
-        self.gantry.connect()
+        with _locked_while_failing(self._lock):
+            self.gantry.connect()
         if self.homing:
             self.gantry.home()
         status = self.gantry.status()
@@ -247,7 +256,10 @@ class LightGantry:
             self.gantry.safe_stop()
         finally:
             self.light = LightState()
-            self.gantry.close()
+            try:
+                self.gantry.close()
+            finally:
+                self._lock.release()
 
 
 class Rig:
@@ -415,3 +427,14 @@ class Rig:
         if self.camera is None:
             raise InputError("this rig was built without a camera")
         return self.camera.capture(exposure_ms)
+
+
+@contextlib.contextmanager
+def _locked_while_failing(lock: ExclusiveLock) -> Iterator[None]:
+    """Take ``lock`` for a device's connect; give it back if the connect fails."""
+    lock.acquire()
+    try:
+        yield
+    except BaseException:
+        lock.release()
+        raise
