@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.suite_product import bench_loop, interactive_record, interactive_variant
+from bench.suite.product import bench_loop, interactive_record, interactive_variant
 from core.field_store import ReflectanceField
 from processing.sample_model_store import models_for_field
 from render.model_relight import ModelRelightSettings

@@ -11,9 +11,9 @@ from typing import Any
 import pytest
 
 from app.cli.bench import add_bench_parser
-from bench.report import CHARTS, pareto_front, write_report
 from bench.suite import SuiteConfig, run_suite
-from bench.suite_results import (
+from bench.suite.report import CHARTS, pareto_front, write_report
+from bench.suite.results import (
     ConfigRecord,
     EnvironmentRecord,
     FieldRecord,

@@ -1,10 +1,10 @@
 """REPORT.md and the charts of the speed-against-accuracy suite, from its results alone.
 
 :func:`write_report` reads nothing but the results (``results.json`` of :mod:`bench.suite`,
-laid out as :class:`bench.suite_results.SuiteResults`), so a report can be regenerated, or
+laid out as :class:`bench.suite.results.SuiteResults`), so a report can be regenerated, or
 extended with other modules' sections (``extra_sections``), without running anything again.
-The figures come from :mod:`bench.report_aggregate`, the charts from
-:mod:`bench.report_charts` and the text from :mod:`bench.report_sections`.
+The figures come from :mod:`bench.suite.report.aggregate`, the charts from
+:mod:`bench.suite.report.charts` and the text from :mod:`bench.suite.report.sections`.
 """
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ from pathlib import Path
 
 from bench.advisor import advisor_chart
 from bench.held_out import held_out_chart
-from bench.report_aggregate import pareto_front
-from bench.report_charts import CHARTS, draw_charts
-from bench.report_sections import report_sections
-from bench.suite_results import SuiteResults
+from bench.suite.report.aggregate import pareto_front
+from bench.suite.report.charts import CHARTS, draw_charts
+from bench.suite.report.sections import report_sections
+from bench.suite.results import SuiteResults
 
 # CHARTS and pareto_front are where the tests have always imported them from.
 __all__ = ["CHARTS", "pareto_front", "write_report"]
@@ -50,7 +50,7 @@ def write_report(
     lines = [
         "# Relighting: speed against accuracy",
         "",
-        "Generated from results.json by `bench.report.write_report`; every figure below was "
+        "Generated from results.json by `bench.suite.report.write_report`; every figure below was "
         "measured in the same run.",
         "",
         *report_sections(results, front),

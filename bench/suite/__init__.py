@@ -2,11 +2,12 @@
 
 Run: ``python -m bench.suite -o DIR [--quick] [--fields DIR]`` (``rig bench``). Writes
 ``DIR/results.json`` (every figure, and the machine), the charts and ``DIR/REPORT.md``
-(:func:`bench.report.write_report`, generated from the results alone). This module runs the
-studies in order and holds the command line; what is compared is in
-:mod:`bench.suite_methods`, the fields and ground truths in :mod:`bench.suite_fields`, the
-measuring in :mod:`bench.suite_measure`, the product's speed in :mod:`bench.suite_product`
-and the layout of the results in :mod:`bench.suite_results`.
+(:func:`bench.suite.report.write_report`, generated from the results alone). This package's
+``__init__`` runs the studies in order and holds the command line; what is compared is in
+:mod:`bench.suite.methods`, the fields and ground truths in :mod:`bench.suite.fields`, the
+measuring in :mod:`bench.suite.measure`, the product's speed in :mod:`bench.suite.product`,
+the layout of the results in :mod:`bench.suite.results` and the report (REPORT.md and the
+charts) in :mod:`bench.suite.report`.
 
 What is measured, for each scene of the simulator, reflectance field and relighting method:
 
@@ -49,17 +50,16 @@ from bench.held_out import (
     world_fields,
     world_rti_captures,
 )
-from bench.report import write_report
 from bench.stability import run_stability
-from bench.suite_fields import (
+from bench.suite.fields import (
     FieldRun,
     environment_record,
     environments,
     field_record,
     open_field,
 )
-from bench.suite_measure import MethodRows
-from bench.suite_methods import (
+from bench.suite.measure import MethodRows
+from bench.suite.methods import (
     FULL,
     QUICK,
     SuiteConfig,
@@ -67,8 +67,9 @@ from bench.suite_methods import (
     config_record,
     k_method,
 )
-from bench.suite_product import bench_product, interactive_record
-from bench.suite_results import (
+from bench.suite.product import bench_product, interactive_record
+from bench.suite.report import write_report
+from bench.suite.results import (
     AdvisorRecord,
     FieldRecord,
     KRow,

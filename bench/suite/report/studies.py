@@ -1,14 +1,14 @@
 """The report's sections on the accuracy studies, each computed from the results alone.
 
 The ablation chain, the Pareto front, error against K, against field density, and LDR against
-HDR panoramas; the charts they show are drawn by :mod:`bench.report_charts`.
+HDR panoramas; the charts they show are drawn by :mod:`bench.suite.report.charts`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-from bench.report_aggregate import (
+from bench.suite.report.aggregate import (
     aggregate,
     chain_rows,
     density_rows,
@@ -20,8 +20,8 @@ from bench.report_aggregate import (
     mean_figure,
     pareto_points,
 )
-from bench.report_markdown import decibels, markdown_table, percent, ratio
-from bench.suite_results import Row, SuiteResults
+from bench.suite.report.markdown import decibels, markdown_table, percent, ratio
+from bench.suite.results import Row, SuiteResults
 
 __all__ = ["study_sections"]
 

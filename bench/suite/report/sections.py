@@ -1,7 +1,7 @@
 """The sections of REPORT.md after its title, each computed from the results alone.
 
 The run's context (the machine, what is measured), the accuracy studies
-(:mod:`bench.report_studies`), the fields, the product's speed, then the advisor's and the
+(:mod:`bench.suite.report.studies`), the fields, the product's speed, then the advisor's and the
 stability study's sections, whose tables their modules format (:mod:`bench.advisor`,
 :mod:`bench.stability`).
 """
@@ -11,10 +11,10 @@ from __future__ import annotations
 from bench.advisor import format_advisor
 from bench.guard_advice import format_advice
 from bench.held_out import format_held_out
-from bench.report_markdown import markdown_table, ratio
-from bench.report_studies import study_sections
 from bench.stability import format_stability
-from bench.suite_results import ProductRecord, SuiteResults
+from bench.suite.report.markdown import markdown_table, ratio
+from bench.suite.report.studies import study_sections
+from bench.suite.results import ProductRecord, SuiteResults
 
 __all__ = ["report_sections"]
 

@@ -1,6 +1,6 @@
 """Measuring one relighting method on one field: its times, its memory and its errors.
 
-:func:`measure_method` opens the method's engine on a :class:`bench.suite_fields.FieldRun`,
+:func:`measure_method` opens the method's engine on a :class:`bench.suite.fields.FieldRun`,
 times the interactive loop, counts the arrays the engine holds and scores a frame of every
 environment and view against the ground truth (relative RMSE, PSNR, :func:`ssim`).
 :class:`MethodRows` measures each (scene, field, mode) once per run and relabels the row for
@@ -18,9 +18,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bench.relight import Truth, image_errors, loop_ms
-from bench.suite_fields import Environment, FieldRun, spec_record
-from bench.suite_methods import FieldSpec, Method, mode_record
-from bench.suite_results import Row, Score
+from bench.suite.fields import Environment, FieldRun, spec_record
+from bench.suite.methods import FieldSpec, Method, mode_record
+from bench.suite.results import Row, Score
 from core.colour import linear_to_srgb
 from core.field_store import ReflectanceField
 from render.relight_mode import RelightMode, open_relighter

@@ -20,9 +20,9 @@ import numpy as np
 
 from bench.capture import bench_capture
 from bench.relight import copy_bandwidth, field_path, loop_ms
-from bench.suite_fields import FieldRun, spec_record, views_of
-from bench.suite_methods import CHAIN_K, FieldSpec, SuiteConfig, k_method, mode_record
-from bench.suite_results import (
+from bench.suite.fields import FieldRun, spec_record, views_of
+from bench.suite.methods import CHAIN_K, FieldSpec, SuiteConfig, k_method, mode_record
+from bench.suite.results import (
     CaptureRecord,
     InteractiveRecord,
     LoopModeRecord,

@@ -1,4 +1,4 @@
-"""The layout of results.json: the records :mod:`bench.suite` writes and :mod:`bench.report` reads.
+"""The layout of results.json: the records :mod:`bench.suite` writes and its report reads.
 
 Every record is a ``TypedDict``, so the in-memory results and the JSON read back are the same
 plain dicts and mypy checks each key on both sides. Sequences are typed ``Sequence`` where
@@ -50,7 +50,7 @@ AdvisorRecord = dict[str, Any]
 #: The stability study's results, :func:`bench.stability.run_stability` (a plain dict there).
 StabilityRecord = dict[str, Any]
 
-#: The scores :func:`bench.report_aggregate.aggregate` averages.
+#: The scores :func:`bench.suite.report.aggregate.aggregate` averages.
 ScoreMetric = Literal["relative_rmse", "sample_relative_rmse", "psnr_db", "ssim"]
 
 #: The per-row figures the report averages over scenes.
@@ -146,7 +146,7 @@ class EnvironmentRecord(TypedDict):
 
 
 class ConfigRecord(TypedDict):
-    """:class:`bench.suite_methods.SuiteConfig` as JSON (one key per field)."""
+    """:class:`bench.suite.methods.SuiteConfig` as JSON (one key per field)."""
 
     name: str
     scenes: Sequence[str]

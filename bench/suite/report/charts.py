@@ -1,7 +1,7 @@
 """The report's charts, drawn from the results alone: Pareto, K, field density, LDR against HDR.
 
 Each chart is a PNG beside REPORT.md (:data:`CHARTS`); the figures on it come from
-:mod:`bench.report_aggregate`, as the tables' do.
+:mod:`bench.suite.report.aggregate`, as the tables' do.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from bench.report_aggregate import (
+from bench.suite.report.aggregate import (
     aggregate,
     chain_rows,
     density_rows,
@@ -23,7 +23,7 @@ from bench.report_aggregate import (
     pareto_front,
     pareto_points,
 )
-from bench.suite_results import SuiteResults
+from bench.suite.results import SuiteResults
 
 __all__ = ["CHARTS", "draw_charts"]
 

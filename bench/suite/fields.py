@@ -17,8 +17,8 @@ from typing import Any, NotRequired, TypedDict, cast
 import numpy as np
 
 from bench.relight import Truth, between_view, field_path, truths_of_views
-from bench.suite_methods import FieldSpec
-from bench.suite_results import EnvironmentRecord, FieldRecord, SpecRecord
+from bench.suite.methods import FieldSpec
+from bench.suite.results import EnvironmentRecord, FieldRecord, SpecRecord
 from core.camera_model import PinholeCamera
 from core.field_store import ReflectanceField
 from core.sample_data import PanoramaName, panorama_path

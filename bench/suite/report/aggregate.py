@@ -1,7 +1,7 @@
 """The report's figures from the results: rows grouped by study and averaged over scores.
 
-Both the charts (:mod:`bench.report_charts`) and the Markdown sections
-(:mod:`bench.report_sections`) read the results through these groupings and means, so a chart
+Both the charts (:mod:`bench.suite.report.charts`) and the Markdown sections
+(:mod:`bench.suite.report.sections`) read the results through these groupings and means, so a chart
 and the table beside it always show the same numbers.
 """
 
@@ -12,7 +12,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from bench.suite_results import Row, RowFigure, ScoreMetric, SuiteResults, is_k_row
+from bench.suite.results import Row, RowFigure, ScoreMetric, SuiteResults, is_k_row
 
 __all__ = [
     "FieldKey",

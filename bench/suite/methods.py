@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from bench.suite_results import ConfigRecord, ModeRecord
+from bench.suite.results import ConfigRecord, ModeRecord
 from core.errors import InputError
 from processing.interpolation import InterpolationMethod
 from processing.sampling import SamplerName
@@ -161,7 +161,7 @@ class SuiteConfig:
     ----------
     name : str, "full", "quick" or a test's own
     scenes : simulator scenes
-    environments : environment names (see :func:`bench.suite_fields.environments`)
+    environments : environment names (see :func:`bench.suite.fields.environments`)
     chain_field : the field of the ablation chain and the K sweep
     density_fields : the other fields of the density sweep (the chain field is one more point)
     density_methods : labels of chain methods run on every density field
