@@ -26,6 +26,7 @@ import zarr
 from numpy.typing import NDArray
 
 from core.errors import DatasetError
+from core.field_attributes import direction_problem, read_attributes
 from core.progress import progress_bar
 
 __all__ = [
@@ -223,6 +224,27 @@ class StoreCheck:
         return "\n".join([f"{head}: {verdict}", *(f"  {line}" for line in self.problems)])
 
 
+def _attribute_problems(path: Path, group: Any, shape: tuple[int, int, int]) -> list[str]:
+    """What :mod:`core.field_attributes` refuses in the store's attributes and directions."""
+    problems = []
+    try:
+        read_attributes(path, dict(group.attrs), shape)
+    except DatasetError as error:
+        problems.append(str(error).removeprefix(f"{path}: "))
+    names = set(group.array_keys())
+    for name, singular in (("light_directions", "light direction"),
+                           ("camera_directions", "camera direction")):  # fmt: skip
+        if name in names:
+            try:
+                values = np.asarray(group[name][...])
+            except Exception:  # unreadable: reported with the arrays
+                continue
+            problem = direction_problem(singular, values)
+            if problem is not None and np.isfinite(values).all():  # non-finite: said above
+                problems.append(problem)
+    return problems
+
+
 def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
     """Read every chunk of the field store at ``path``: present, decodable, finite, digest.
 
@@ -254,6 +276,7 @@ def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
             if values.dtype.kind == "f" and (found := non_finite(values)) is not None:
                 problems.append(f"{found[0]} non-finite values in {name!r}, first at {found[1]}")
     s, t, p, _ = radiance.shape
+    problems += _attribute_problems(path, group, (s, t, p))
     digests: list[bytes] = []
     unreadable = False
     keys = [(a, b) for a in range(s) for b in range(t)]

@@ -45,6 +45,7 @@ from zarr.core.array_spec import ArrayConfigParams
 
 from core.camera_model import PinholeCamera
 from core.errors import DatasetError, InputError
+from core.field_attributes import check_directions, direction_problem, read_attributes
 from core.field_integrity import (
     non_finite,
     radiance_digest,
@@ -162,6 +163,9 @@ class FieldStoreWriter:
         t, s = len(light_directions), len(cameras)
         if min(p, t, s) < 1:
             raise InputError(f"a field needs samples, lights and cameras, got P={p} T={t} S={s}")
+        problem = direction_problem("light direction", light_directions)
+        if problem is not None:
+            raise InputError(f"{path}: {problem}")
         for name, values in (("points", points), ("normals", normals)):
             if values is not None and np.shape(values) != (p, 3):
                 raise InputError(f"field {name} must have shape ({p}, 3), got {np.shape(values)}")
@@ -434,12 +438,8 @@ class ReflectanceField:
         if len(radiance.shape) != 4 or radiance.shape[3] != 3:
             raise DatasetError(f"{where}: radiance must be (S, T, P, 3), got {radiance.shape}")
         s, t, p, _ = radiance.shape
-        samples = attrs.get("samples", {"kind": "points"})
-        image_shape = None
-        if samples.get("kind") == "pixels":
-            image_shape = (int(samples["height"]), int(samples["width"]))
-        elif samples.get("kind") != "points":
-            raise DatasetError(f"{where}: unknown sample kind {samples.get('kind')!r}")
+        checked = read_attributes(where, attrs, (s, t, p))
+        image_shape = checked.image_shape
 
         def read(name: str, shape: tuple[int, ...]) -> NDArray[Any] | None:
             if name not in names:
@@ -455,31 +455,31 @@ class ReflectanceField:
         points, normals = read("points", (p, 3)), read("normals", (p, 3))
         if image_shape is None and (points is None or normals is None):
             raise DatasetError(f"{where}: a field of surface points needs points and normals")
-        if image_shape is not None and image_shape[0] * image_shape[1] != p:
-            raise DatasetError(f"{where}: {image_shape} pixels do not match P = {p}")
-        try:
-            cameras = [PinholeCamera(**c) for c in attrs["cameras"]]
-        except (KeyError, TypeError, InputError) as error:
-            raise DatasetError(f"{where}: bad camera records: {error}") from error
-        if len(cameras) != s:
-            raise DatasetError(f"{where}: {len(cameras)} camera records for S = {s}")
         assert light_directions is not None and camera_directions is not None
         assert visibility is not None
-        dark = attrs.get("dark_cameras")
+        check_directions(where, "light direction", light_directions)
+        check_directions(where, "camera direction", camera_directions)
+        for name, values in (("points", points), ("normals", normals)):
+            if values is not None and not np.isfinite(values).all():
+                row = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
+                raise DatasetError(
+                    f"{where}: {name} {row} is {values[row].tolist()}, not finite: rebuild the "
+                    "store from its source"
+                )
         return cls(
             path=where,
             light_directions=light_directions.astype(np.float64),
             camera_directions=camera_directions.astype(np.float64),
-            cameras=cameras,
+            cameras=checked.cameras,
             visibility=visibility.astype(bool),
             points=None if points is None else points.astype(np.float32),
             normals=None if normals is None else normals.astype(np.float32),
             image_shape=image_shape,
-            light_model=dict(attrs.get("light_model", {})),
-            provenance=dict(attrs.get("provenance", {})),
+            light_model=checked.light_model,
+            provenance=checked.provenance,
             radiance=radiance,
-            radiance_digest=attrs.get("radiance_digest"),
-            dark_cameras=None if dark is None else tuple(int(c) for c in dark),
+            radiance_digest=checked.radiance_digest,
+            dark_cameras=checked.dark_cameras,
             cached_slabs=cached_slabs,
         )
 

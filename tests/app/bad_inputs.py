@@ -347,6 +347,46 @@ def deep_journal_line(workspace: Workspace, tmp: Path) -> None:
     journal.write_text("".join(lines))
 
 
+def altered_attribute(name: str, value: object) -> Prepare:
+    """A copy of the field whose attribute ``name`` is ``value`` (written behind its back)."""
+
+    def prepare(workspace: Workspace, tmp: Path) -> None:
+        import zarr
+
+        zarr.open_group(str(_copy_field(workspace, tmp)), mode="r+").attrs[name] = value
+
+    return prepare
+
+
+def scaled_light_directions(scale: float) -> Prepare:
+    """A copy of the field whose light directions are scaled (NaN: light 2 made NaN)."""
+
+    def prepare(workspace: Workspace, tmp: Path) -> None:
+        import zarr
+
+        group = zarr.open_group(str(_copy_field(workspace, tmp)), mode="r+")
+        directions = np.asarray(group["light_directions"][...])
+        if np.isnan(scale):
+            directions[2] = np.nan
+        else:
+            directions *= scale
+        group["light_directions"][...] = directions
+
+    return prepare
+
+
+#: Store attributes of the wrong type (issue 28): each was a traceback from core.field_store.
+ALTERED_ATTRIBUTES: tuple[tuple[str, str, object, str], ...] = (
+    ("samples a string", "samples", "points", "attribute samples is 'points'"),
+    ("pixels without height", "samples", {"kind": "pixels", "width": 20}, "attribute samples"),
+    ("dark_cameras ['x']", "dark_cameras", ["x"], "attribute dark_cameras is ['x']"),
+    ("light_model a string", "light_model", "directional", "attribute light_model is"),
+    ("provenance a list", "provenance", [1, 2], "attribute provenance is [1, 2]"),
+    ("radiance_digest a number", "radiance_digest", 5, "attribute radiance_digest is 5"),
+    ("cameras a string", "cameras", "abc", "attribute cameras is 'abc'"),
+)
+
+
 def garbage_models(workspace: Workspace, tmp: Path) -> None:
     """A copy of the field with a model fit beside it that is not an npz file."""
     store = _copy_field(workspace, tmp)
@@ -716,6 +756,54 @@ def _cases() -> list[Case]:
             prepare=nan_radiance,
         ),
     ]
+    # field stores altered behind the writer's back
+    altered = (
+        "relight", "{tmp}/field.zarr", "--env", pano, "--view", "20,40", "--size", "32x32",
+        "-o", "{tmp}/r.png",
+    )  # fmt: skip
+    for what, name, value, words in ALTERED_ATTRIBUTES:
+        prepare = altered_attribute(name, value)
+        cases += [
+            Case(f"relight: {what}", altered, ("field.zarr", words), prepare=prepare),
+            Case(
+                f"verify: {what}",
+                ("verify", "{tmp}/field.zarr", "--quiet"),
+                (words,),
+                status=1,
+                prepare=prepare,
+                stdout=True,
+            ),
+        ]
+    for what, scale, words in (
+        ("light directions of length 10", 10.0, "light direction 0 is"),
+        ("NaN light directions", float("nan"), "light direction 2 is (nan, nan, nan)"),
+    ):
+        prepare = scaled_light_directions(scale)
+        cases += [
+            Case(f"relight: {what}", altered, ("field.zarr", words), prepare=prepare),
+            Case(
+                f"fit: {what}",
+                ("fit", "{tmp}/field.zarr", "--quiet"),
+                ("field.zarr", words),
+                prepare=prepare,
+            ),
+            Case(
+                f"evaluate: {what}",
+                ("evaluate", "{tmp}/field.zarr", "--split", "rings", "--quiet"),
+                ("field.zarr", words),
+                prepare=prepare,
+            ),
+        ]
+    cases.append(
+        Case(
+            "verify: light directions of length 10",
+            ("verify", "{tmp}/field.zarr", "--quiet"),
+            ("light direction 0 is", "of length 10"),
+            status=1,
+            prepare=scaled_light_directions(10.0),
+            stdout=True,
+        )
+    )
     # rig verify
     cases += [
         Case("verify: missing path", ("verify", "{tmp}/none"), ("none", "no such")),

@@ -1,6 +1,8 @@
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -8,6 +10,7 @@ import zarr
 
 from core.camera_model import PinholeCamera
 from core.errors import DatasetError, InputError
+from core.field_integrity import check_store
 from core.field_store import FieldStoreWriter, ReflectanceField
 from sim.field import field_cameras, simulate_field
 
@@ -179,3 +182,64 @@ def test_tiles_outside_the_view_or_of_points_are_refused(tmp_path: Path, store: 
         field.tiles([(3, 8)], 10, columns=1)
     with pytest.raises(InputError, match="need a field of pixels"):
         ReflectanceField.open(store).tiles([(0, 0)], 4, columns=1)
+
+
+# --- attributes and directions altered behind the writer's back (issue 28) -------------------
+
+
+def _altered(store: Path, tmp_path: Path) -> tuple[Path, Any]:
+    copy = tmp_path / "altered.zarr"
+    shutil.copytree(store, copy)
+    return copy, zarr.open_group(str(copy), mode="r+")
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "words"),
+    [
+        ("samples", "points", "attribute samples is 'points'"),
+        ("samples", {"kind": "pixels", "width": 20}, "attribute samples is {'kind': 'pixels'"),
+        ("dark_cameras", ["x"], "attribute dark_cameras is ['x']"),
+        ("light_model", "directional", "attribute light_model is 'directional'"),
+        ("provenance", [1, 2], "attribute provenance is [1, 2]"),
+        ("radiance_digest", 5, "attribute radiance_digest is 5"),
+    ],
+)
+def test_an_attribute_of_the_wrong_type_is_refused_on_opening_and_by_verify(
+    store: Path, tmp_path: Path, name: str, value: object, words: str
+) -> None:
+    copy, group = _altered(store, tmp_path)
+    group.attrs[name] = value
+    with pytest.raises(DatasetError) as raised:
+        ReflectanceField.open(copy)
+    assert str(raised.value).startswith(f"{copy}: {words}")
+    report = check_store(copy)
+    assert not report.ok and any(problem.startswith(words) for problem in report.problems)
+
+
+@pytest.mark.parametrize(("scale", "index", "words"), [(10.0, 0, "of length 10 (3 more)"),
+                                                       (np.nan, 2, "(nan, nan, nan)")])  # fmt: skip
+def test_light_directions_that_are_not_unit_vectors_are_refused_with_their_index(
+    store: Path, tmp_path: Path, scale: float, index: int, words: str
+) -> None:
+    copy, group = _altered(store, tmp_path)
+    directions = np.asarray(group["light_directions"][...])
+    if np.isnan(scale):
+        directions[2] = np.nan
+    else:
+        directions *= scale
+    group["light_directions"][...] = directions
+    with pytest.raises(DatasetError) as raised:
+        ReflectanceField.open(copy)
+    assert str(raised.value).startswith(f"{copy}: light direction {index} is ")
+    assert words in str(raised.value)
+    assert not check_store(copy).ok
+
+
+def test_the_writer_refuses_directions_that_are_not_unit_vectors(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match=r"light direction 1 is \(0, 0, 2\), of length 2"):
+        FieldStoreWriter(
+            tmp_path / "f.zarr", points=None, normals=None,
+            light_directions=np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 2.0]]),
+            cameras=[PinholeCamera(0.0, 30.0, width=4, height=4)], image_shape=(2, 3),
+        )  # fmt: skip
+    assert list(tmp_path.iterdir()) == []
