@@ -234,6 +234,23 @@ class Dataset:
         """``DATASET/images``."""
         return self.path / IMAGES_DIR
 
+    def refuse_output_in_images(self, output: str | os.PathLike[str], flag: str = "-o") -> None:
+        """Refuse to write ``output`` among the captured images (verify would call it foreign).
+
+        Raises
+        ------
+        InputError
+            ``output`` is (or lies inside) the dataset's ``images`` folder.
+        """
+        images = self.images_path.resolve()
+        target = Path(output).resolve()
+        if target == images or target.is_relative_to(images):
+            raise InputError(
+                f"{flag} {output}: inside the dataset's images folder {self.images_path}, which "
+                "holds only the captured images (rig verify would report the output as an "
+                "unexpected file); write it elsewhere, e.g. beside the dataset"
+            )
+
     def _confined(self, relative: str, where: str) -> Path:
         try:
             check_relative(relative)

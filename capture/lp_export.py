@@ -90,6 +90,7 @@ def export_lp(
     for record in lights:
         groups[record.camera_index, record.exposure_index].append(record)
     bracketed = len({record.exposure_index for record in lights}) > 1
+    dataset.refuse_output_in_images(out_dir)
     folder = Path(out_dir)
     written: list[Path] = []
     for (camera, exposure), records in sorted(groups.items()):

@@ -57,6 +57,7 @@ __all__ = [
     "RAW_SUFFIXES",
     "DecodeError",
     "DecodedImage",
+    "ImageFormat",
     "decode_image",
 ]
 
@@ -78,6 +79,32 @@ class DecodeError(DatasetError):
 
 
 @dataclass(frozen=True)
+class ImageFormat:
+    """What one image file of a capture holds: its encoding and its stored channels.
+
+    A capture is one format throughout: an 8-bit sRGB file among 16-bit linear ones, or a grey
+    file among colour ones, is a file from elsewhere (:func:`decode_image`'s ``expected``).
+
+    Attributes
+    ----------
+    encoding : "raw", "linear16", "srgb8" or "float"
+    channels : 1 (grey) or 3 (colour; an alpha channel is dropped)
+    example : str, a file of this format, for messages
+    """
+
+    encoding: str
+    channels: int
+    example: str = ""
+
+    def describe(self) -> str:
+        """In words: "16-bit linear colour"."""
+        words = {"raw": "RAW", "linear16": "16-bit linear", "srgb8": "8-bit sRGB",
+                 "float": "floating-point"}  # fmt: skip
+        colour = "grey" if self.channels == 1 else "colour"
+        return f"{words.get(self.encoding, self.encoding)} {colour}"
+
+
+@dataclass(frozen=True)
 class DecodedImage:
     """One image file, decoded.
 
@@ -91,12 +118,19 @@ class DecodedImage:
         Values that reached saturation and so only bound the true value from below.
     encoding : str
         What the file held: "raw", "linear16", "srgb8" or "float".
+    channels : int, 1 for a grey file (its value repeated in ``linear``), else 3
     """
 
     path: Path
     linear: NDArray[np.float32]
     saturated: NDArray[np.bool_]
     encoding: str
+    channels: int = 3
+
+    @property
+    def format(self) -> ImageFormat:
+        """The file's :class:`ImageFormat`."""
+        return ImageFormat(self.encoding, self.channels, str(self.path))
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -110,6 +144,7 @@ def decode_image(
     expected_shape: tuple[int, int] | None = None,
     transfer: Transfer | None = None,
     demosaic: str = "linear",
+    expected: ImageFormat | None = None,
 ) -> DecodedImage:
     """Decode one image file to linear float32 RGB and its saturation mask.
 
@@ -122,7 +157,10 @@ def decode_image(
         Override the transfer curve of 8/16-bit PNG, JPEG and TIFF files (default: 8-bit is sRGB,
         16-bit is linear).
     demosaic : str, one of :data:`DEMOSAIC_ALGORITHMS`
-        RAW demosaicing; ``linear`` (bilinear) is exactly linear in the raw data.
+        RAW demosaicing; ``linear`` (bilinear) is exactly linear in the raw data (checked
+        whatever the file's format: a capture's option, not one file's).
+    expected : ImageFormat, optional
+        Refuse a file of another encoding or other channels (the capture's other files').
 
     Returns
     -------
@@ -132,7 +170,8 @@ def decode_image(
     ------
     DecodeError
         The file is missing, of an unknown format, unreadable, truncated, corrupt, not RGB or
-        grey, or not ``expected_shape``; the message names the file.
+        grey, not ``expected_shape`` or not of the ``expected`` format; the message names
+        the file.
     """
     file = Path(path)
     suffix = file.suffix.lower()
@@ -140,6 +179,8 @@ def decode_image(
         raise DecodeError(f"{file}: no such image file")
     if transfer not in (None, "srgb", "linear"):
         raise InputError(f"transfer must be 'srgb' or 'linear', got {transfer!r}")
+    if demosaic not in DEMOSAIC_ALGORITHMS:
+        raise InputError(f"unknown demosaic {demosaic!r}; use one of {DEMOSAIC_ALGORITHMS}")
     if suffix in RAW_SUFFIXES:
         image = _decode_raw(file, demosaic)
     elif suffix in TIFF_SUFFIXES or suffix in OPENCV_SUFFIXES:
@@ -154,12 +195,19 @@ def decode_image(
     if expected_shape is not None and image.shape != tuple(expected_shape):
         (h, w), (eh, ew) = image.shape, expected_shape
         raise DecodeError(f"{file}: image is {w}x{h} pixels, the camera model says {ew}x{eh}")
+    if expected is not None and (image.encoding, image.channels) != (
+        expected.encoding,
+        expected.channels,
+    ):
+        raise DecodeError(
+            f"{file}: a {image.format.describe()} image among the capture's "
+            f"{expected.describe()} ones (such as {expected.example}): one bit depth and one "
+            "set of channels per capture; replace the file with one of the capture's format"
+        )
     return image
 
 
 def _decode_raw(file: Path, demosaic: str) -> DecodedImage:
-    if demosaic not in DEMOSAIC_ALGORITHMS:
-        raise InputError(f"unknown demosaic {demosaic!r}; use one of {DEMOSAIC_ALGORITHMS}")
     try:
         check_tiff_strips(file)
     except ImageFileError as error:
@@ -201,12 +249,17 @@ def _decode_raw(file: Path, demosaic: str) -> DecodedImage:
 
 
 def _rgb(file: Path, pixels: NDArray[Any]) -> NDArray[Any]:
-    """(H, W) grey or (H, W, 3/4) colour pixels as (H, W, 3)."""
+    """(H, W) grey or (H, W, 3/4) colour pixels as (H, W, 3) (see :func:`_channels`)."""
     if pixels.ndim == 2:
         return np.repeat(pixels[:, :, None], 3, axis=2)
     if pixels.ndim == 3 and pixels.shape[2] in (3, 4):
         return pixels[:, :, :3]
     raise DecodeError(f"{file}: expected a grey or RGB image, got pixels of shape {pixels.shape}")
+
+
+def _channels(pixels: NDArray[Any]) -> int:
+    """1 for grey pixels (H, W), else 3."""
+    return 1 if pixels.ndim == 2 else 3
 
 
 #: What 8- and 16-bit files hold: (encoding name, default transfer curve).
@@ -220,18 +273,20 @@ def _from_pixels(file: Path, pixels: NDArray[Any], transfer: Transfer | None) ->
     rgb = _rgb(file, pixels)
     if rgb.dtype in (np.float16, np.float32, np.float64):
         values = np.ascontiguousarray(rgb, dtype=np.float32)
-        return DecodedImage(file, values, np.zeros(values.shape, dtype=bool), "float")
+        saturated = np.zeros(values.shape, dtype=bool)
+        return DecodedImage(file, values, saturated, "float", _channels(pixels))
     if rgb.dtype not in _INTEGER_ENCODINGS:
         raise DecodeError(f"{file}: unsupported pixel type {rgb.dtype}")
     encoding, default = _INTEGER_ENCODINGS[rgb.dtype]
     saturated = np.ascontiguousarray(rgb >= np.iinfo(rgb.dtype).max)
     values = linear_from_pixels(rgb, transfer=transfer or default)
-    return DecodedImage(file, np.ascontiguousarray(values), saturated, encoding)
+    return DecodedImage(file, np.ascontiguousarray(values), saturated, encoding, _channels(pixels))
 
 
 def _decode_exr(file: Path) -> DecodedImage:
-    rgb = np.ascontiguousarray(_rgb(file, _pixels(file)), dtype=np.float32)
-    return DecodedImage(file, rgb, np.zeros(rgb.shape, dtype=bool), "float")
+    pixels = _pixels(file)
+    rgb = np.ascontiguousarray(_rgb(file, pixels), dtype=np.float32)
+    return DecodedImage(file, rgb, np.zeros(rgb.shape, dtype=bool), "float", _channels(pixels))
 
 
 def _pixels(file: Path) -> NDArray[Any]:

@@ -249,7 +249,6 @@ def build_field(
             **dict(provenance or {}),
         },
     )
-    options = {"demosaic": demosaic, "transfer": transfer}
     s_count, t_count, p_count = len(layout.cameras), len(layout.light_indices), len(cloud.points)
     # Each camera's images, by path: what a task needs of the dataset.
     brackets: list[dict[int, list[tuple[Path, float]]]] = [{} for _ in layout.cameras]
@@ -258,6 +257,10 @@ def build_field(
         brackets[c][t] = [(data.image_path(r), r.exposure_ms) for r in records]
     for (c, exposure_ms), record in layout.darks.items():
         darks[c][exposure_ms] = data.image_path(record)
+    # One format per capture: every file is decoded against the first one's.
+    first = next(path for camera in brackets for taken in camera.values() for path, _ in taken)
+    reference = decode_image(first, demosaic=demosaic, transfer=transfer).format
+    options = {"demosaic": demosaic, "transfer": transfer, "expected": reference}
     scales = (radiance_scale * layout.intensities).astype(np.float32)
     writer = store.slab_writer()
     jobs = [CameraJob(s, pinhole, brackets[s], darks[s], layout.light_directions, scales,

@@ -117,6 +117,7 @@ def merge_exposures(exposures: Sequence[Exposure]) -> MergedImage:
                     f"{decoded.path}: image of shape {decoded.linear.shape} in a bracket of "
                     f"{shape} (with {files[0]})"
                 )
+        _check_dark(exposure)
     total = np.zeros(shape, dtype=np.float32)
     weights = np.zeros(shape, dtype=np.float32)
     shortest = min(exposures, key=lambda e: e.exposure_ms)
@@ -140,3 +141,24 @@ def merge_exposures(exposures: Sequence[Exposure]) -> MergedImage:
     merged = np.where(usable, total / np.where(usable, weights, 1.0), fallback)
     darks = tuple(str(e.dark.path) for e in exposures if e.dark is not None)
     return MergedImage(merged.astype(np.float32), ~usable, files + darks)
+
+
+#: A dark frame whose mean exceeds its light image's by this share of full scale, and is more
+#: than twice it, was not taken with the light off (sensor noise and a light behind the object
+#: leave the two about equal).
+DARK_EXCESS = 0.02
+
+
+def _check_dark(exposure: Exposure) -> None:
+    """Refuse a dark frame brighter than the image it is subtracted from (negative radiance)."""
+    if exposure.dark is None:
+        return
+    lit = float(np.mean(exposure.image.linear))
+    dark = float(np.mean(exposure.dark.linear))
+    if dark > max(2.0 * lit, lit + DARK_EXCESS):
+        raise DecodeError(
+            f"{exposure.dark.path}: the dark frame (mean {dark:.3f} of full scale) is brighter "
+            f"than the light image it is subtracted from ({exposure.image.path}, mean "
+            f"{lit:.3f}): it was taken with the light on or at another exposure; retake it with "
+            "the light off at the same exposure"
+        )

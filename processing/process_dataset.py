@@ -23,7 +23,7 @@ from capture.verify import VerifyReport
 from core.camera_model import RigCamera
 from core.errors import DatasetError, InputError
 from core.field_store import BELOW_HORIZON
-from processing.decode import decode_image
+from processing.decode import DEMOSAIC_ALGORITHMS, decode_image
 from processing.field_builder import FieldBuildReport, build_field
 from processing.point_cloud import PointCloud, read_point_cloud
 
@@ -202,6 +202,9 @@ def process_dataset(
         absent from the field (``absent_cameras``).
     """
     data = dataset if isinstance(dataset, Dataset) else Dataset.open(dataset)
+    data.refuse_output_in_images(output)
+    if demosaic not in DEMOSAIC_ALGORITHMS:  # before the verification's minutes
+        raise InputError(f"--demosaic {demosaic!r}: use one of {', '.join(DEMOSAIC_ALGORITHMS)}")
     check = verify_for_processing(data, allow_missing=allow_missing)
     calibration = None if ignore_calibration else (data.calibration or None)
     camera = dataset_camera_model(data, distance=camera_distance, fov_deg=fov_deg, size=size)

@@ -11,6 +11,7 @@ import pytest
 from numpy.typing import NDArray
 
 from core.colour import srgb_to_linear
+from core.errors import InputError
 from core.image_io import write_exr, write_linear16_tiff, write_srgb8
 from processing.decode import DecodedImage, DecodeError, decode_image
 from processing.hdr import Exposure, hat, merge_exposures
@@ -197,3 +198,34 @@ def test_merge_errors_name_the_files() -> None:
     )
     with pytest.raises(DecodeError, match=r"small\.tif: image of shape \(2, 4, 3\) in a bracket"):
         merge_exposures([Exposure(_decoded(white * 0, SENSOR), 10.0, small)])
+
+
+def test_a_file_of_another_format_than_the_capture_is_named(tmp_path: Path) -> None:
+    pixels = to_linear16(expose(scene(), SENSOR), SENSOR)
+    assert cv2.imwrite(str(tmp_path / "a.png"), pixels[:, :, ::-1])
+    write_srgb8(tmp_path / "b.png", to_srgb8(expose(scene(), SENSOR), SENSOR))
+    assert cv2.imwrite(str(tmp_path / "grey.png"), pixels[:, :, 1])
+    capture = decode_image(tmp_path / "a.png").format
+    assert (capture.encoding, capture.channels) == ("linear16", 3)
+    assert decode_image(tmp_path / "a.png", expected=capture).encoding == "linear16"
+    with pytest.raises(DecodeError, match=r"b\.png: a 8-bit sRGB colour image among the "
+                       r"capture's 16-bit linear colour ones \(such as .*a\.png\)"):  # fmt: skip
+        decode_image(tmp_path / "b.png", expected=capture)
+    grey = decode_image(tmp_path / "grey.png")
+    assert grey.channels == 1 and grey.linear.shape[2] == 3
+    with pytest.raises(DecodeError, match=r"grey\.png: a 16-bit linear grey image"):
+        decode_image(tmp_path / "grey.png", expected=capture)
+    # The demosaic is the capture's option, refused on any file.
+    with pytest.raises(InputError, match="unknown demosaic 'bogus'"):
+        decode_image(tmp_path / "a.png", demosaic="bogus")
+
+
+def test_a_dark_frame_brighter_than_its_image_is_refused() -> None:
+    sensor = replace(SENSOR, exposure_s=0.004)
+    image, lit_dark = _decoded(scene() * 0.02, sensor), _decoded(scene() * 0.3, sensor)
+    with pytest.raises(DecodeError, match=r"the dark frame \(mean 0\.\d+ of full scale\) is "
+                       r"brighter than the light image"):  # fmt: skip
+        merge_exposures([Exposure(image, 4.0, lit_dark)])
+    # A light behind the object leaves its image about as dark as the dark frame: kept.
+    black = _decoded(np.full(scene().shape, 0.01), sensor)
+    merge_exposures([Exposure(black, 4.0, _decoded(np.full(scene().shape, 0.0101), sensor, 1))])

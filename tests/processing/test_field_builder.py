@@ -9,12 +9,14 @@ from typing import Any
 
 import numpy as np
 import pytest
+import tifffile
 from numpy.typing import NDArray
 
 from capture.dataset import Dataset, ImageKey
+from capture.lp_export import export_lp
 from core.camera_model import RigCamera
 from core.directions import angles_deg_from_direction, hemisphere_layout
-from core.errors import DatasetError
+from core.errors import DatasetError, InputError
 from core.field_store import ReflectanceField
 from core.image_io import write_linear16_tiff, write_srgb8
 from processing.decode import DecodeError
@@ -360,3 +362,27 @@ def test_a_build_on_a_local_cluster_is_the_same_store(tmp_path: Path) -> None:
         there.exposures, there.missing, there.visible_fraction)  # fmt: skip
     assert not (tmp_path / "broken.zarr").exists()
     assert [p.name for p in tmp_path.iterdir() if "partial" in p.name] == []
+
+
+def test_one_image_of_another_bit_depth_or_channels_is_named(tmp_path: Path) -> None:
+    capture = make_capture(tmp_path, cameras=1, lights=3, points=500)
+    image = capture.path / "images" / "light_c0_l1_e0.tif"
+    sixteen = tifffile.imread(image)
+    tifffile.imwrite(image, (sixteen // 257).astype(np.uint8))
+    with pytest.raises(DecodeError, match=r"light_c0_l1_e0\.tif: a 8-bit sRGB colour image "
+                       r"among the capture's 16-bit linear colour ones"):  # fmt: skip
+        _build(capture, tmp_path / "built.zarr")
+    tifffile.imwrite(image, sixteen[:, :, 1])
+    with pytest.raises(DecodeError, match=r"light_c0_l1_e0\.tif: a 16-bit linear grey image"):
+        _build(capture, tmp_path / "built2.zarr")
+
+
+def test_outputs_are_refused_among_the_captured_images(tmp_path: Path) -> None:
+    capture = make_capture(tmp_path, cameras=1, lights=2, points=500)
+    dataset = Dataset.open(capture.path)
+    for inside in (dataset.images_path, dataset.images_path / "field.zarr"):
+        with pytest.raises(InputError, match="inside the dataset's images folder"):
+            dataset.refuse_output_in_images(inside)
+        with pytest.raises(InputError, match="inside the dataset's images folder"):
+            export_lp(dataset, inside)
+    dataset.refuse_output_in_images(capture.path / "field.zarr")  # beside the images: fine
