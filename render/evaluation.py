@@ -656,10 +656,12 @@ def evaluate(
         stack = np.concatenate([images[key][views.pixels(key[0])] for key in images])
         scale = 1.0 if rti else display_scale(stack)
     if client is None:
-        results = [
-            _score_method(fit, test, name, scale, views, images)
-            for name in progress_bar(methods, desc="evaluate", unit="method", show=progress)
-        ]
+        results = []
+        with progress_bar(total=len(methods), desc="evaluate", unit="method", show=progress) as bar:
+            for name in methods:
+                bar.set_description(f"evaluate: {name}")  # which method the time goes to
+                results.append(_score_method(fit, test, name, scale, views, images))
+                bar.update()
     else:
         from dask.delayed import delayed
 

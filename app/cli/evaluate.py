@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -130,6 +131,11 @@ def _run_evaluate(args: argparse.Namespace) -> int:
             pair = against_test(field, args.test, mask, transfer=args.transfer)
             names = _lp_names(args.test) if args.test.suffix.lower() == ".lp" else None
             where = str(args.test)
+        if args.methods == PREDICTORS and not args.quiet:
+            # Every method by default: say what that costs and how to choose fewer.
+            print(f"scoring all {len(PREDICTORS)} methods one after another (the learned ones "
+                  "train for up to a few minutes each); --methods NAME,... scores fewer, e.g. "
+                  "--methods rbf,ptm-8bit,hsh3-8bit,adaptive", file=sys.stderr)  # fmt: skip
         with cluster_for(args) as client:
             result = evaluate(pair.fit, pair.test, args.methods, mask=pair.mask,
                               test_names=names, progress=not args.quiet, client=client,

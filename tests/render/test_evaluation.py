@@ -71,6 +71,17 @@ def test_the_measured_lights_themselves_score_perfectly(
     assert len(result.methods[0].per_image) == 3 * 30
 
 
+def test_the_progress_names_the_method_under_way(glossy: tuple[ReflectanceField, ...]) -> None:
+    from core.progress import ProgressEvent, reporting_to
+
+    seen: list[ProgressEvent] = []
+    with reporting_to(seen.append):
+        evaluate(glossy[0], glossy[1], ["nearest", "barycentric"])
+    names = [event.what for event in seen]
+    assert "evaluate: nearest" in names and "evaluate: barycentric" in names
+    assert seen[-1].finished and seen[-1].done == 2 and seen[-1].total == 2
+
+
 def test_held_out_lights_rank_the_methods(glossy: tuple[ReflectanceField, ...]) -> None:
     fit, test = glossy
     result = evaluate(fit, test, ["nearest", "barycentric", "rbf", "ptm", "lambert+ggx"])
