@@ -180,6 +180,7 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
     directory = require_output(args.output, directory=True)
     lights = read_lp(args.lights)
     stems = [_entry_stem(directory, name, args.lights) for name in lights.files]
+    _distinct(stems, tuple(lights.files), args.lights)
     if field.sample_kind == "pixels":
         camera = 0
     else:
@@ -254,10 +255,26 @@ def say_resampled(native: tuple[int, int], size: tuple[int, int]) -> None:
 
 def _entry_stem(directory: Path, name: str, lp: Path) -> Path:
     """Where the image of ``.lp`` entry ``name`` goes (no suffix); never outside ``directory``."""
-    relative = Path(name.replace("\\", "/")).with_suffix("")
-    if relative.is_absolute() or ".." in relative.parts:
+    if any(ord(character) < 32 for character in name):
+        raise InputError(f"{lp}: entry {name!r} holds a control character (a NUL byte?)")
+    path = Path(name.replace("\\", "/"))
+    if path.is_absolute() or ".." in path.parts:
         raise InputError(
             f"{lp}: entry {name!r} would be written outside {directory}; name images by "
             "relative paths inside the output folder"
         )
-    return directory / relative
+    if path.name in ("", ".") or not path.stem:
+        raise InputError(f"{lp}: entry {name!r} names no file; give each light an image name")
+    return directory / path.with_suffix("")
+
+
+def _distinct(stems: list[Path], names: tuple[str, ...], lp: Path) -> None:
+    """Refuse two entries written to one file (the second would replace the first)."""
+    first: dict[Path, str] = {}
+    for stem, name in zip(stems, names, strict=True):
+        if stem in first:
+            raise InputError(
+                f"{lp}: entries {first[stem]!r} and {name!r} would both be written to "
+                f"{stem}.png; give each light its own image name"
+            )
+        first[stem] = name

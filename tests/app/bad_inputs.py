@@ -450,6 +450,9 @@ def two_lights_lp(workspace: Workspace, tmp: Path) -> None:
     """``two.lp`` (two lights from above) and ``escape.lp`` (an entry naming ../x.png)."""
     (tmp / "two.lp").write_text("2\na.png 0 0 1\nb.png 0.5 0 0.87\n")
     (tmp / "escape.lp").write_text("1\n../x.png 0 0 1\n")
+    (tmp / "same.lp").write_text("2\na.png 0 0 1\na.jpg 0.5 0 0.87\n")
+    (tmp / "dot.lp").write_text("1\n. 0 0 1\n")
+    (tmp / "nul.lp").write_text("1\na\x00b.png 0 0 1\n")
 
 
 def an_output_folder(workspace: Workspace, tmp: Path) -> None:
@@ -1314,6 +1317,24 @@ def _cases() -> list[Case]:
                 "{tmp}/out",
             ),
             ("would be written outside",),
+            prepare=two_lights_lp,
+        ),
+        Case(
+            "relight --lights: two entries to one file",
+            ("relight", "{field}", "--lights", "{tmp}/same.lp", "--camera", "0", "-o", "{tmp}/out"),
+            ("would both be written to",),
+            prepare=two_lights_lp,
+        ),
+        Case(
+            "relight --lights: an entry named .",
+            ("relight", "{field}", "--lights", "{tmp}/dot.lp", "--camera", "0", "-o", "{tmp}/out"),
+            ("names no file",),
+            prepare=two_lights_lp,
+        ),
+        Case(
+            "relight --lights: an entry with a NUL byte",
+            ("relight", "{field}", "--lights", "{tmp}/nul.lp", "--camera", "0", "-o", "{tmp}/out"),
+            ("control character",),
             prepare=two_lights_lp,
         ),
         Case(
