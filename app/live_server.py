@@ -26,13 +26,16 @@ Routes
 ``GET /api/settings.json``    the current settings
 
 The server binds 127.0.0.1 by default: the viewer has no authentication, so exposing it on a
-network is the user's explicit choice (``--host``).
+network is the user's explicit choice (``--host``), and a warning says what it exposes and how
+to tunnel over SSH instead. Names from a request (an upload's, a path under ``/rti/``) are
+checked before they name a file: the last part only, no control character, at most 255 bytes.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import ipaddress
 import json
 import sys
 import tempfile
@@ -60,7 +63,13 @@ from processing.sampling import SAMPLERS
 from render.live_session import LIVE_MODES, ZOOM_RANGE, LiveControls, LiveFrame, LiveSession
 from render.output import write_image
 
-__all__ = ["FRAME_JPEG_QUALITY", "PendingSession", "ViewerServer", "start_viewer"]
+__all__ = [
+    "FRAME_JPEG_QUALITY",
+    "PendingSession",
+    "ViewerServer",
+    "exposure_warning",
+    "start_viewer",
+]
 
 #: A pending session over a field of pixels larger than this (pixels) opens on the page's
 #: request: the directional light needs no fit, relighting under a panorama does.
@@ -71,6 +80,8 @@ FRAME_JPEG_QUALITY = 90
 REFINE_AFTER_S = 0.3
 #: Largest upload (a 4k x 2k float EXR panorama is ~100 MB).
 MAX_UPLOAD_BYTES = 256 * 1024 * 1024
+#: Longest name of an upload, bytes (what Linux file systems hold).
+MAX_NAME_BYTES = 255
 #: The first byte of each binary WebSocket message: which picture follows.
 PICTURE_TAGS = {"frame": 1, "panorama": 2, "truth": 3, "error": 4}
 _WEB = "web"
@@ -322,7 +333,11 @@ async def _chosen_picture(request: web.Request) -> web.Response:
 
 async def _light_file(request: web.Request) -> web.FileResponse:
     light = request.app[VIEWER].light
-    path = None if light is None else light.file(request.match_info["path"])
+    relative = request.match_info["path"]
+    path = None
+    if light is not None and _name_problem(relative, limit=4096) is None:
+        with contextlib.suppress(OSError, ValueError):  # a name no file system holds
+            path = light.file(relative)
     if path is None:
         raise _error(web.HTTPNotFound, f"{request.match_info['path']}: no such file of the export")
     return web.FileResponse(path)
@@ -339,9 +354,31 @@ async def _state(request: web.Request) -> web.Response:
     return web.json_response(viewer.state())
 
 
+def _name_problem(name: str, *, limit: int = MAX_NAME_BYTES) -> str | None:
+    """Why ``name`` (from a request) cannot name a file here, or None.
+
+    A control character (a NUL byte ends a name for the operating system) or more bytes than
+    a file system holds: refused with the reason rather than failing in the middle of a write.
+    """
+    control = next((c for c in name if ord(c) < 32 or ord(c) == 127), None)
+    if control is not None:
+        return (
+            f"{name[:40]!r}: a file name cannot hold the control character {control!r}; rename "
+            "the file"
+        )
+    size = len(name.encode("utf-8", "surrogateescape"))
+    if size > limit:
+        return f"{name[:40]}...: the name is {size} bytes long, at most {limit}; rename the file"
+    return None
+
+
 async def _upload(request: web.Request, kind: str) -> web.Response:
     viewer = request.app[VIEWER]
+    # Only the last part of the name: "../../x.exr" is stored as x.exr, in a folder of its own.
     name = Path(request.query.get("name", "")).name
+    problem = _name_problem(name)
+    if problem is not None:
+        raise _error(web.HTTPBadRequest, problem)
     suffix = Path(name).suffix.lower()
     if suffix not in _SUFFIXES:
         raise _error(web.HTTPBadRequest, f"{name or 'the upload'}: send one of "
@@ -351,7 +388,13 @@ async def _upload(request: web.Request, kind: str) -> web.Response:
         raise _error(web.HTTPBadRequest, f"{name}: the upload is empty")
     folder = Path(tempfile.mkdtemp(dir=viewer.uploads))
     path = folder / name
-    path.write_bytes(body)
+    try:
+        path.write_bytes(body)
+    except OSError as error:  # a full disk
+        path.unlink(missing_ok=True)
+        raise _error(
+            web.HTTPInsufficientStorage, f"{name}: cannot store the upload: {error.strerror}"
+        ) from None
 
     def load() -> None:
         if kind == "panorama":
@@ -497,7 +540,7 @@ async def _live(request: web.Request) -> web.WebSocketResponse:
                 changes = data["controls"]
                 if not isinstance(changes, dict):
                     raise TypeError
-            except (ValueError, KeyError, TypeError):
+            except (ValueError, KeyError, TypeError, RecursionError):  # deep: not controls
                 await socket.send_json({"type": "error", "message": 'send {"controls": {...}}'})
                 continue
             pending.update(changes)
@@ -605,10 +648,40 @@ class ViewerServer:
         self._stopped.wait()
 
 
+def exposure_warning(host: str, port: int) -> str | None:
+    """What to say when serving on ``host`` reaches beyond this machine; None for loopback.
+
+    The viewer has no login: a page of the field, and uploads into this machine, for anyone
+    who can reach the port. The warning says how to view from elsewhere without that.
+    """
+    try:
+        address = ipaddress.ip_address(host.strip("[]"))
+    except ValueError:
+        if host.lower() in ("localhost", "localhost.localdomain"):
+            return None
+        every = host in ("", "*")
+    else:
+        if address.is_loopback:
+            return None
+        every = address.is_unspecified
+    reach = "every network this machine is on" if every else f"the network of {host}"
+    return (
+        f"serving on {host or '*'}:{port} answers {reach}, and the viewer has no login: "
+        "anyone who can reach it sees the field and can send this machine files. To view "
+        "from another machine, serve on 127.0.0.1 (the default) and tunnel instead: run "
+        f"`ssh -N -L {port}:127.0.0.1:{port} USER@THIS-MACHINE` there and open "
+        f"http://127.0.0.1:{port}/"
+    )
+
+
 def start_viewer(
     session: LiveSession | PendingSession, *, host: str = "127.0.0.1", port: int = 0
 ) -> ViewerServer:
-    """Serve the viewer on ``host``:``port`` (0: a free port) from a background thread."""
+    """Serve the viewer on ``host``:``port`` (0: a free port) from a background thread.
+
+    Beyond this machine (``--host 0.0.0.0``) a warning on stderr says what that exposes and
+    how to tunnel instead (:func:`exposure_warning`).
+    """
     uploads = tempfile.TemporaryDirectory(prefix="rig-view-")
     loop = asyncio.new_event_loop()
     runner = web.AppRunner(
@@ -627,6 +700,9 @@ def start_viewer(
         raise
     bound = runner.addresses[0]
     shown = f"[{bound[0]}]" if ":" in str(bound[0]) else bound[0]
+    warning = exposure_warning(host, int(bound[1]))
+    if warning is not None:
+        print(f"warning: {warning}", file=sys.stderr, flush=True)
     stopped = threading.Event()
 
     def serve() -> None:

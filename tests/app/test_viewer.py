@@ -13,6 +13,7 @@ import asyncio
 import json
 import os
 import shutil
+import time
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
@@ -27,9 +28,11 @@ import pytest
 
 from app.cli import main
 from app.cli.view import open_session
-from app.live_server import ViewerServer, start_viewer
+from app.live_server import ViewerServer, exposure_warning, start_viewer
+from core.camera_model import PinholeCamera, camera_to_rig
 from core.colour import luminance
-from core.field_store import ReflectanceField
+from core.directions import hemisphere_layout
+from core.field_store import FieldStoreWriter, ReflectanceField
 from core.sample_data import panorama_path
 from render.live_session import LiveSession
 from render.output import display_picture
@@ -224,6 +227,134 @@ def test_bad_uploads_are_refused_with_the_reason(
     status, body = _post(server.url + "api/modulation?name=half.png", _png(np.full((8, 16), 128)))
     assert status == 200 and "half.png" in body["modulations"]
     assert "half.png" in session.modulations
+
+
+def _get(url: str) -> tuple[int, bytes]:
+    try:
+        with urllib.request.urlopen(url, timeout=30) as response:
+            return response.status, response.read()
+    except urllib.error.HTTPError as error:
+        return error.code, error.read()
+
+
+def test_upload_names_no_file_can_have_are_refused_with_the_reason(
+    viewer: tuple[ViewerServer, LiveSession],
+) -> None:
+    # Each was a traceback in the server (ValueError: embedded null byte; OSError 36).
+    server, _ = viewer
+    picture = _png(np.full((8, 16), 128))
+    status, body = _post(server.url + "api/modulation?name=a%00b.png", picture)
+    assert status == 400 and "control character '\\x00'" in body["error"]
+    status, body = _post(server.url + f"api/modulation?name={'n' * 300}.png", picture)
+    assert status == 400 and "the name is 304 bytes long, at most 255" in body["error"]
+    status, body = _post(server.url + "api/panorama?name=line%0Abreak.exr", picture)
+    assert status == 400 and "control character" in body["error"]
+    assert _get(server.url + "api/state")[0] == 200  # the server answers on
+
+
+def test_an_upload_named_up_the_tree_stays_in_the_uploads(
+    viewer: tuple[ViewerServer, LiveSession],
+) -> None:
+    server, session = viewer
+    uploads = Path(server._uploads.name)
+    status, body = _post(
+        server.url + "api/modulation?name=..%2F..%2Fescaped.png", _png(np.full((8, 16), 99))
+    )
+    assert status == 200 and "escaped.png" in body["modulations"]
+    assert "escaped.png" in session.modulations
+    assert [p.relative_to(uploads).parts[1:] for p in uploads.rglob("escaped.png")] == [
+        ("escaped.png",)
+    ]  # in a folder of its own inside the uploads, nowhere above them
+    assert not (uploads.parent / "escaped.png").exists()
+    assert not (uploads.parent.parent / "escaped.png").exists()
+
+
+@pytest.mark.parametrize(
+    "path",
+    ["%2e%2e/%2e%2e/%2e%2e/etc/passwd", "viewer.js/%2e%2e/%2e%2e/etc/passwd",
+     "..%2f..%2f..%2fetc%2fpasswd", "api/frame.png%00.exr"],
+)  # fmt: skip
+def test_traversal_urls_of_the_page_are_not_found(
+    viewer: tuple[ViewerServer, LiveSession], path: str
+) -> None:
+    server, _ = viewer
+    status, body = _get(server.url + path)
+    assert status == 404 and b"root:" not in body
+
+
+def _pixel_field(path: Path, size: int = 12) -> ReflectanceField:
+    """A matte disc seen from above under 25 dome lights (a field of pixels, for /rti/)."""
+    lights = hemisphere_layout(25)
+    ys, xs = np.mgrid[0:size, 0:size]
+    u, v = (xs + 0.5) / size * 2 - 1, 1 - (ys + 0.5) / size * 2
+    normals = np.stack([u, v, np.sqrt(np.clip(1 - u**2 - v**2, 0.05, 1))], axis=-1)
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    shading = np.clip(np.einsum("hwc,tc->thw", normals, lights), 0, None)
+    camera = PinholeCamera(0.0, 0.0, 10.0, 10.0, size, size)
+    writer = FieldStoreWriter(
+        path, points=None, normals=None, light_directions=camera_to_rig(lights, camera),
+        cameras=[camera], image_shape=(size, size),
+    )  # fmt: skip
+    for t, image in enumerate(shading):
+        writer.write_slab(0, t, np.repeat(image.reshape(-1, 1), 3, axis=1).astype(np.float32))
+    writer.write_visibility(0, np.ones(size * size, dtype=bool))
+    writer.finish()
+    return ReflectanceField.open(path)
+
+
+def test_traversal_urls_of_the_export_are_not_found(tmp_path: Path) -> None:
+    field = _pixel_field(tmp_path / "disc.zarr")
+    with ThreadPoolExecutor(max_workers=1) as thread:  # off Playwright's loop, as above
+        opened = open_session(field, [panorama_path("courtyard")], size=(32, 32), models=None)
+        server = thread.submit(lambda: start_viewer(opened)).result()
+    try:
+        deadline = 240  # polls of 0.5 s: the export's fits, on a loaded machine
+        described: dict[str, Any] = {}
+        while deadline and described.get("status") not in ("ready", "failed"):
+            described = json.loads(_get(server.url + "api/light")[1])
+            deadline -= 1
+            time.sleep(0.5)
+        assert described.get("status") == "ready", described
+        export = Path(server._uploads.name) / "rti"
+        served = sorted(p for p in export.rglob("*") if p.is_file())[0]
+        relative = served.relative_to(export).as_posix()
+        # The route serves the export's files (so a 404 below is the refusal, not a dead route).
+        assert _get(server.url + "rti/" + relative) == (200, served.read_bytes())
+        for path in ("%2e%2e/%2e%2e/%2e%2e/%2e%2e/etc/passwd", "..%2f..%2f..%2fetc%2fpasswd",
+                     "a%00b", "a" * 300, f"{relative}%00"):  # fmt: skip
+            status, body = _get(server.url + "rti/" + path)
+            assert status == 404 and b"root:" not in body, path
+    finally:
+        server.stop()
+
+
+@pytest.mark.parametrize(
+    ("host", "warned"),
+    [("0.0.0.0", "every network"), ("::", "every network"), ("192.168.1.20", "network of"),
+     ("127.0.0.1", None), ("::1", None), ("localhost", None)],
+)  # fmt: skip
+def test_serving_beyond_this_machine_warns_and_says_how_to_tunnel(
+    host: str, warned: str | None
+) -> None:
+    warning = exposure_warning(host, 8765)
+    if warned is None:
+        assert warning is None
+    else:
+        assert warning is not None and warned in warning and "no login" in warning
+        assert "ssh -N -L 8765:127.0.0.1:8765 USER@THIS-MACHINE" in warning
+
+
+def test_rig_view_on_every_network_prints_the_warning(
+    viewer: tuple[ViewerServer, LiveSession], capsys: pytest.CaptureFixture[str]
+) -> None:
+    _, session = viewer
+    with ThreadPoolExecutor(max_workers=1) as thread:
+        server = thread.submit(lambda: start_viewer(session, host="0.0.0.0")).result()
+    server.stop()
+    port = server.url.rstrip("/").rsplit(":", 1)[1]
+    err = capsys.readouterr().err
+    assert err.startswith(f"warning: serving on 0.0.0.0:{port} answers every network")
+    assert f"ssh -N -L {port}:127.0.0.1:{port}" in err
 
 
 def _png(grey: np.ndarray) -> bytes:
