@@ -74,6 +74,8 @@ def _run_batch(args: argparse.Namespace) -> int:
 
     if args.output.exists():
         raise InputError(f"{args.output}: exists; choose another path or remove it")
+    if args.gif:  # checked before the work, as the store is
+        _check_gif_folder(args.output.with_suffix(""), args.env)
     field = ReflectanceField.open(args.field)
     for path in args.env:
         read_panorama(path)  # every panorama readable before any work starts
@@ -121,9 +123,28 @@ def _run_batch(args: argparse.Namespace) -> int:
         folder = args.output.with_suffix("")
         folder.mkdir(parents=True, exist_ok=True)
         for index, path in enumerate(plan.panoramas):
-            write_sequence(folder / f"{index:03d}-{Path(path).stem}.gif",
+            write_sequence(folder / _gif_name(index, path),
                            read_batch_frames(store, index), fps=args.fps)  # fmt: skip
     elapsed = time.perf_counter() - started
     print(f"{len(plan.panoramas)} environments x {args.frames} frames ({args.sequence}) in "
           f"{elapsed:.1f} s -> {store}")  # fmt: skip
     return 0
+
+
+def _gif_name(index: int, panorama: str | Path) -> str:
+    """The GIF of environment ``index`` in ``rig batch --gif``'s folder."""
+    return f"{index:03d}-{Path(panorama).stem}.gif"
+
+
+def _check_gif_folder(folder: Path, panoramas: list[Path]) -> None:
+    """Refuse a --gif folder that is a file, or GIFs that would replace existing files."""
+    if folder.exists() and not folder.is_dir():
+        raise InputError(
+            f"--gif writes the sequences into {folder}/, which is a file; choose another -o "
+            "or move that file"
+        )
+    for index, panorama in enumerate(panoramas):
+        target = folder / _gif_name(index, panorama)
+        if target.exists():
+            raise InputError(f"{target}: exists (--gif would replace it); remove it or choose "
+                             "another -o")  # fmt: skip

@@ -132,3 +132,15 @@ def test_rig_batch_chooses_the_mode_fits_and_writes_gifs(
                str(tmp_path / "x.zarr")]  # fmt: skip
     assert main(no_view) == 2
     assert "--view AZ,INCL is needed" in capsys.readouterr().err
+    # --gif refuses, before any work, a folder that is a file and GIFs it would replace.
+    gif = ["batch", str(field), "--env", str(panorama_path("studio")), "--view", "20,40",
+           "--gif", "--quiet"]  # fmt: skip
+    (tmp_path / "blocked").write_text("a file")
+    assert main([*gif, "-o", str(tmp_path / "blocked.zarr")]) == 2
+    assert "which is a file" in capsys.readouterr().err
+    shutil.rmtree(out)
+    before = (tmp_path / "batch" / "000-studio.gif").read_bytes()
+    assert main([*gif, "-o", str(out)]) == 2
+    assert "000-studio.gif: exists (--gif would replace it)" in capsys.readouterr().err
+    assert (tmp_path / "batch" / "000-studio.gif").read_bytes() == before
+    assert not out.exists()
