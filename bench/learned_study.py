@@ -1,7 +1,7 @@
 """Held-out PSNR of the learned relighting model against its training time, per configuration.
 
-Each configuration of :class:`processing.learned_rti.TrainingSettings` is trained on the fit
-lights of each capture and scored on its held-out lights (8-bit sRGB PSNR of the test
+Each configuration of :class:`processing.learned_rti_training.TrainingSettings` is trained on
+the fit lights of each capture and scored on its held-out lights (8-bit sRGB PSNR of the test
 images' mean squared error, as ``rig evaluate`` scores), beside ``rbf`` in the same run: this
 machine's speed varies, so compare the differences within one run.
 
@@ -35,7 +35,7 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.sample_data import rti_capture_path
 from processing.image_quality import psnr_8bit
-from processing.learned_rti import TrainingSettings
+from processing.learned_rti_training import TrainingSettings
 from processing.rti import open_field_or_rti
 from render.evaluation import test_field_from_lp
 from render.light_prediction import make_predictor

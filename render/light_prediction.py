@@ -71,7 +71,8 @@ from core.field_store import ReflectanceField
 from core.light_set import LightSet
 from core.progress import progress_bar
 from processing.interpolation import InterpolationMethod, interpolation_weights, mean_spacing_deg
-from processing.learned_rti import LearnedRTI, TrainingSettings, train_learned_rti
+from processing.learned_rti import LearnedRTI
+from processing.learned_rti_training import TrainingSettings, train_learned_rti
 from processing.sample_model_store import models_for_field
 from processing.sample_models import (
     BASIS_MODELS,

@@ -116,7 +116,7 @@ def _run_export_web(args: argparse.Namespace) -> int:
     if args.format == "png" and args.tiles is False:
         raise InputError(PNG_UNTILED)  # before the capture is read: nothing to wait for
 
-    from processing.neural_rti import NeuralSettings
+    from processing.neural_rti_fit import NeuralSettings
     from processing.rti import open_field_or_rti
     from render.web_export.export import export_web
 

@@ -28,7 +28,7 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.image_io import write_exr, write_png16
 from processing.image_quality import display_scale
-from processing.neural_rti import NeuralSettings
+from processing.neural_rti_fit import NeuralSettings
 from processing.sample_models import photometric_stereo
 from render.web_export.basis import basis_planes, terms, write_basis
 from render.web_export.levels import eight_bit

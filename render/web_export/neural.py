@@ -42,14 +42,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.atomic import write_json_atomic
-from processing.neural_rti import (
-    CODE_SIZE,
-    NeuralRTI,
-    NeuralSettings,
-    fit_codes,
-    fit_neural_rti,
-    tune_decoder,
-)
+from processing.neural_rti import CODE_SIZE, NeuralRTI
+from processing.neural_rti_fit import NeuralSettings, fit_codes, fit_neural_rti, tune_decoder
 from render.web_export.planes import PlaneStore, quantise
 from render.web_export.result import Probe, WebModelExport, psnr_levels
 from render.web_export.tiles import Layout, stored, write_plane

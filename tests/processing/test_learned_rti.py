@@ -7,17 +7,9 @@ import pytest
 
 from core.directions import hemisphere_layout
 from core.errors import InputError
-from processing.learned_rti import (
-    CODE_SIZE,
-    LearnedRTI,
-    TrainingSettings,
-    _decoded,
-    _numpy_layers,
-    _torch_mlp,
-    light_features,
-    train_learned_rti,
-    validation_lights,
-)
+from processing.learned_rti import CODE_SIZE, LearnedRTI, light_features
+from processing.learned_rti_training import TrainingSettings, _decoded, train_learned_rti
+from processing.network_training import numpy_layers, torch_mlp, validation_lights
 
 torch = pytest.importorskip("torch", reason="the learned extra (PyTorch) is not installed")
 
@@ -38,11 +30,11 @@ def _lambertian(lights: np.ndarray, samples: int = 300, seed: int = 0) -> np.nda
 
 
 def test_numpy_inference_is_the_trained_network() -> None:
-    network = _torch_mlp([7, 5, 5, 2])
+    network = torch_mlp([7, 5, 5, 2])
     x = np.random.default_rng(1).normal(size=(11, 7)).astype(np.float32)
     with torch.no_grad():
         expected = network(torch.from_numpy(x)).numpy()
-    layers = _numpy_layers(network)
+    layers = numpy_layers(network)
     assert [w.shape for w, _ in layers] == [(7, 5), (5, 5), (5, 2)]
     model = LearnedRTI(np.zeros((2, 3), np.float32), layers, layers, 1.0, 0.0, 0, 0.0)
     from processing.learned_rti import _mlp
@@ -55,8 +47,8 @@ def test_numpy_decoding_is_the_split_torch_decoder(frequencies: int) -> None:
     # The decoder's first layer is applied in two parts (code, light features) in both.
     k, features = 4, 3 + 6 * frequencies
     torch.manual_seed(0)
-    decoder = _torch_mlp([k + features, 6, 6, 3])
-    encoder = _torch_mlp([6, 5, k])  # only its output size matters to decode
+    decoder = torch_mlp([k + features, 6, 6, 3])
+    encoder = torch_mlp([6, 5, k])  # only its output size matters to decode
     rng = np.random.default_rng(2)
     codes = rng.normal(size=(13, k)).astype(np.float32)
     d = hemisphere_layout(5, "fibonacci").astype(np.float32)
@@ -76,8 +68,8 @@ def test_numpy_decoding_is_the_split_torch_decoder(frequencies: int) -> None:
     np.testing.assert_allclose(y, whole, rtol=1e-5, atol=1e-6)
     model = LearnedRTI(
         d,
-        _numpy_layers(encoder),
-        _numpy_layers(decoder),
+        numpy_layers(encoder),
+        numpy_layers(decoder),
         1.0,
         0.0,
         0,

@@ -8,15 +8,8 @@ import pytest
 
 from core.directions import hemisphere_layout
 from core.errors import InputError
-from processing.neural_rti import (
-    CODE_SIZE,
-    HIDDEN,
-    NeuralRTI,
-    NeuralSettings,
-    fit_codes,
-    fit_neural_rti,
-    tune_decoder,
-)
+from processing.neural_rti import CODE_SIZE, HIDDEN, NeuralRTI
+from processing.neural_rti_fit import NeuralSettings, fit_codes, fit_neural_rti, tune_decoder
 
 torch = pytest.importorskip("torch", reason="the learned extra (PyTorch) is not installed")
 

@@ -10,7 +10,7 @@ from core.directions import hemisphere_layout
 from core.errors import InputError
 from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.interpolation import interpolation_weights
-from processing.learned_rti import TrainingSettings
+from processing.learned_rti_training import TrainingSettings
 from processing.sample_models import evaluate_basis
 from render.light_prediction import (
     BOUND,

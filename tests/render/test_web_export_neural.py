@@ -30,7 +30,7 @@ from app.cli.export import add_export_web
 from core.camera_model import rig_to_camera
 from core.field_store import ReflectanceField
 from core.sample_data import rti_capture_path
-from processing.neural_rti import NeuralSettings
+from processing.neural_rti_fit import NeuralSettings
 from processing.rti import import_rti
 from render.light_prediction import eight_bit_levels
 from render.web_export.display import openlime_display

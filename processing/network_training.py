@@ -1,0 +1,134 @@
+"""What training both relightable networks shares: device, threads, layers, codes, held-out lights.
+
+PyTorch's device and threads, dense networks and their numpy layers, principal-component
+starting codes, and held-out lights spread over the dome.
+
+The learned rung (:mod:`processing.learned_rti_training`) and OpenLIME's neural model
+(:mod:`processing.neural_rti_fit`) both train small dense networks with PyTorch and keep them
+as numpy arrays; both start free codes at principal-component scores and hold out lights
+spread over the dome. PyTorch is imported only inside these functions.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from core.errors import InputError
+from processing.learned_rti import _encoder_input
+
+if TYPE_CHECKING:  # imported when training: relighting never needs it
+    import torch
+
+__all__ = [
+    "Device",
+    "idle_cores",
+    "numpy_layers",
+    "principal_codes",
+    "torch_mlp",
+    "training_device",
+    "validation_lights",
+]
+
+#: Where a network is trained: "auto" (CUDA when available), "cpu" or "cuda".
+Device = Literal["auto", "cpu", "cuda"]
+
+
+def validation_lights(
+    directions: NDArray[np.floating], share: float, *, seed: int = 0
+) -> NDArray[np.int64]:
+    """Indices (sorted, int64) of about ``share`` of the T lights (T, 3), spread over the dome.
+
+    Farthest-point picks: no two held-out lights are neighbours, so each leaves a gap about
+    one light spacing wide, like the gaps between measured lights that relighting fills. At
+    least 2 lights stay in and, when ``share`` > 0, at least 1 is held out.
+    """
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    count = min(len(d) - 2, max(1, round(share * len(d)))) if share > 0 else 0
+    if count <= 0:
+        return np.zeros(0, dtype=np.int64)
+    first = int(np.random.default_rng(seed).integers(len(d)))
+    chosen = [first]
+    distance = np.linalg.norm(d - d[first], axis=1)
+    while len(chosen) < count:
+        nxt = int(np.argmax(distance))
+        chosen.append(nxt)
+        distance = np.minimum(distance, np.linalg.norm(d - d[nxt], axis=1))
+    return np.sort(np.asarray(chosen, dtype=np.int64))
+
+
+def idle_cores() -> int:
+    """Cores no other process keeps busy (1-minute load average), at least 1.
+
+    PyTorch's CPU threads wait for each other at every layer: on cores other processes also
+    use, two threads measured 6 to 9 times slower than one, while on idle cores one thread
+    is at most twice as slow as two.
+    """
+    cores = os.cpu_count() or 1
+    try:
+        load = os.getloadavg()[0]
+    except OSError:  # not reported on this system
+        return 1
+    return max(1, min(cores, math.floor(cores - load)))
+
+
+def training_device(asked: Device) -> str:
+    """The device to train on: CUDA when asked for (refused when absent) or, for "auto", present."""
+    import torch
+
+    available = torch.cuda.is_available()
+    if asked == "cuda" and not available:
+        raise InputError("learned model: device 'cuda' asked for, but PyTorch sees no CUDA GPU")
+    return "cuda" if asked == "cuda" or (asked == "auto" and available) else "cpu"
+
+
+def principal_codes(encoded: NDArray[np.float32], k: int, seed: int) -> NDArray[np.float32]:
+    """Starting free codes (N, k) float32: each sample's first k principal-component scores.
+
+    Free codes move about one learning rate per pass, so from small random values they need
+    a hundred passes to spread; the principal scores (of the encoded values, scaled to a
+    standard deviation of 0.5 along the first component) already tell samples apart.
+    """
+    rows = _encoder_input(encoded).astype(np.float64)
+    rng = np.random.default_rng(seed)
+    basis_rows = rows[rng.permutation(len(rows))[:20000]]
+    mean = basis_rows.mean(axis=0)
+    _, _, vt = np.linalg.svd(basis_rows - mean, full_matrices=False)
+    scores = np.zeros((len(rows), k))
+    used = min(k, vt.shape[0])
+    scores[:, :used] = (rows - mean) @ vt[:used].T
+    spread = float(np.std(scores[:, 0])) if len(rows) > 1 else 0.0
+    scores *= 0.5 / spread if spread > 0 else 1.0
+    return scores.astype(np.float32)
+
+
+def torch_mlp(sizes: list[int]) -> torch.nn.Sequential:
+    """Dense layers of ``sizes`` with ELU between them (none after the last)."""
+    import torch
+
+    layers: list[torch.nn.Module] = []
+    for i in range(len(sizes) - 1):
+        layers.append(torch.nn.Linear(sizes[i], sizes[i + 1]))
+        if i < len(sizes) - 2:
+            layers.append(torch.nn.ELU())
+    return torch.nn.Sequential(*layers)
+
+
+def numpy_layers(
+    network: torch.nn.Sequential,
+) -> tuple[tuple[NDArray[np.float32], NDArray[np.float32]], ...]:
+    """The (weight (in, out), bias) pairs of the network's dense layers, as numpy arrays."""
+    import torch
+
+    return tuple(
+        (
+            np.ascontiguousarray(module.weight.detach().cpu().numpy().T, dtype=np.float32),
+            module.bias.detach().cpu().numpy().astype(np.float32),
+        )
+        for module in network
+        if isinstance(module, torch.nn.Linear)
+    )
