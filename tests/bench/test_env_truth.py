@@ -1,4 +1,4 @@
-"""The pure parts of bench/env_truth.py: the light-stage sum, the scores, the report.
+"""The pure parts of bench/env_truth.py and its report: the light-stage sum, the scores, the report.
 
 No renders: the sum is checked on synthetic captures whose relit answer is known.
 """
@@ -10,17 +10,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from bench.env_truth import (
-    CLI_METHODS,
-    RIG,
-    SUM_FULL,
-    SUM_UPPER,
-    Score,
-    format_tables,
-    light_stage_sum,
-    relative_rmse,
-    scores,
-)
+from bench.env_truth import RIG, light_stage_sum, relative_rmse, scores
+from bench.env_truth_report import CLI_METHODS, SUM_FULL, SUM_UPPER, Score, format_tables
 from core.directions import hemisphere_layout
 
 ALBEDO = np.array([0.8, 0.5, 0.2])
