@@ -501,6 +501,8 @@ def _fit_sample(
     out_energy[p] = energy
 
 
+# fit_samples repeats _fit_sample's argument list on purpose: numba kernels take arrays and
+# scalars, not objects, and the parallel loop hands each sample's row to the serial fit.
 @numba.njit(cache=True, parallel=True)
 def fit_samples(
     radiance: NDArray[np.float32],
