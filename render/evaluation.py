@@ -48,13 +48,9 @@ from processing.image_quality import (
 )
 from processing.rti import import_rti
 from render.field_view import FieldView
-from render.light_prediction import (
-    PREDICTORS,
-    LightPredictor,
-    make_predictor,
-    training_summary,
-)
+from render.light_prediction import PREDICTORS, make_predictor, training_summary
 from render.light_splits import split_lights
+from render.prediction_methods import LightPredictor
 from render.rung_choice import choose_light_rung
 
 __all__ = [

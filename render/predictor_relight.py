@@ -36,12 +36,8 @@ from processing.measured_region import MeasuredRegion
 from processing.sample_models import SampleModels
 from render.engine_lighting import PanoramaLitEngine
 from render.field_view import FieldView
-from render.light_prediction import (
-    PREDICTORS,
-    LightPredictor,
-    environment_radiance,
-    make_predictor,
-)
+from render.light_prediction import PREDICTORS, environment_radiance, make_predictor
+from render.prediction_methods import LightPredictor
 from render.relighter import Predictor, RelitImage
 
 __all__ = ["INTERPOLATING", "PredictorRelightSettings", "PredictorRelighter"]

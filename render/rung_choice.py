@@ -43,8 +43,9 @@ from core.field_store import ReflectanceField
 from core.progress import ProgressBar, progress_bar
 from processing.image_quality import display_scale
 from processing.measured_region import MeasuredRegion
-from render.light_prediction import LightPredictor, MixturePredictor, make_predictor
+from render.light_prediction import make_predictor
 from render.light_splits import lowest_lights, split_lights
+from render.prediction_methods import LightPredictor, MixturePredictor
 
 __all__ = [
     "GAP_EXPONENT",

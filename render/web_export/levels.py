@@ -18,7 +18,7 @@ import functools
 import numpy as np
 from numpy.typing import NDArray
 
-from render.light_prediction import eight_bit_levels
+from render.rti_fits import eight_bit_levels
 
 __all__ = ["eight_bit"]
 

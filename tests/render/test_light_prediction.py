@@ -12,17 +12,14 @@ from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.interpolation import interpolation_weights
 from processing.learned_rti_training import TrainingSettings
 from processing.sample_models import evaluate_basis
-from render.light_prediction import (
+from render.light_prediction import PREDICTORS, make_predictor
+from render.prediction_methods import (
     BOUND,
     BOUND_SPACING_DEG,
-    PREDICTORS,
-    RBF_SIGMAS,
     bound_factor,
-    choose_rbf_sigma,
     leave_one_out_barycentric,
-    make_predictor,
-    rbf_weights,
 )
+from render.rti_fits import RBF_SIGMAS, choose_rbf_sigma, rbf_weights
 from sim.field import field_cameras, simulate_field
 
 HEIGHT, WIDTH = 4, 6

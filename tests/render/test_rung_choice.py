@@ -8,7 +8,7 @@ import pytest
 from core.directions import hemisphere_layout
 from core.field_store import ReflectanceField
 from processing.rti import import_rti
-from render.light_prediction import MixturePredictor
+from render.prediction_methods import MixturePredictor
 from render.rung_choice import LOWEST, UseGaps, choose_light_rung, light_folds
 from sim.rti_capture import write_rti_capture
 

@@ -37,7 +37,9 @@ from core.lp_format import read_lp
 from core.sample_data import rti_capture_path
 from processing.rti import import_rti
 from processing.sample_models import evaluate_basis
-from render.light_prediction import bound_factor, eight_bit_levels, make_predictor
+from render.light_prediction import make_predictor
+from render.prediction_methods import bound_factor
+from render.rti_fits import eight_bit_levels
 from render.web_export import automatic_tile_size, openlime_display
 from render.web_export.export import WebExport, export_web
 

@@ -32,7 +32,7 @@ from core.field_store import ReflectanceField
 from core.sample_data import rti_capture_path
 from processing.neural_rti_fit import NeuralSettings
 from processing.rti import import_rti
-from render.light_prediction import eight_bit_levels
+from render.rti_fits import eight_bit_levels
 from render.web_export.display import openlime_display
 from render.web_export.export import WebExport, export_web
 
