@@ -40,8 +40,9 @@ from core.sample_data import panorama_path, rti_capture_path
 from processing.panorama import read_panorama
 from processing.rti import open_field_or_rti
 from processing.sample_models import fit_sample_models
-from render.evaluation import evaluate, test_field_from_lp
+from render.evaluation import evaluate
 from render.guards import relight_warnings
+from render.held_out_lights import test_field_from_lp
 from render.light_splits import split_lights
 from render.relight_mode import HeldOutComparison, most_accurate_mode
 from render.relighter import best_settings

@@ -35,7 +35,8 @@ from core.directions import hemisphere_layout
 from core.field_store import ReflectanceField
 from core.sample_data import rti_capture_path
 from processing.rti import open_field_or_rti
-from render.evaluation import Evaluation, evaluate, test_field_from_lp
+from render.evaluation import Evaluation, evaluate
+from render.held_out_lights import test_field_from_lp
 from render.light_prediction import PREDICTORS
 from render.light_splits import split_lights
 from sim.field import field_cameras, simulate_field

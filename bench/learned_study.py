@@ -37,7 +37,7 @@ from core.sample_data import rti_capture_path
 from processing.image_quality import psnr_8bit
 from processing.learned_rti_training import TrainingSettings
 from processing.rti import open_field_or_rti
-from render.evaluation import test_field_from_lp
+from render.held_out_lights import test_field_from_lp
 from render.light_prediction import make_predictor
 from render.light_splits import split_lights
 

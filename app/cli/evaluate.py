@@ -116,12 +116,13 @@ def _read_mask(path: Path, shape: tuple[int, int] | None) -> Any:
 def _run_evaluate(args: argparse.Namespace) -> int:
     from core.atomic import atomic_path, write_json_atomic
     from processing.rti import open_field_or_rti
-    from render.evaluation import against_test, evaluate, held_out_split
+    from render.evaluation import evaluate
+    from render.held_out_lights import against_test, held_out_split
 
     with open_field_or_rti(args.field, progress=not args.quiet, transfer=args.transfer) as field:
         mask = None if args.mask is None else _read_mask(args.mask, field.image_shape)
         # In memory: the field's lights split, or the test capture; a large view as tiles of
-        # it, read band by band (render.evaluation.pixel_sample), never whole.
+        # it, read band by band (render.held_out_lights.pixel_sample), never whole.
         if args.split is not None:
             pair = held_out_split(field, args.split, mask)
             assert pair.test_lights is not None

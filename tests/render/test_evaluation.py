@@ -167,7 +167,7 @@ def capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_a_large_view_is_sampled_by_tiles_spread_evenly() -> None:
-    from render.evaluation import TILE_SIDE, pixel_sample
+    from render.held_out_lights import TILE_SIDE, pixel_sample
 
     assert pixel_sample((43, 64)) is None  # the bundled capture is scored whole
     assert pixel_sample(None) is None
@@ -190,7 +190,7 @@ def test_a_large_view_is_sampled_by_tiles_spread_evenly() -> None:
 def test_tiles_score_what_the_whole_view_predicts_there(capture: Path, tmp_path: Path) -> None:
     from processing.image_quality import image_quality
     from processing.rti import import_rti
-    from render.evaluation import held_out_split
+    from render.held_out_lights import held_out_split
     from render.light_prediction import make_predictor
 
     field = import_rti(capture, tmp_path / "relief.zarr", progress=False)
@@ -231,11 +231,11 @@ def test_rig_evaluate_says_it_scored_tiles(
     capture: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture[str],
 ) -> None:  # fmt: skip
-    import render.evaluation
+    import render.held_out_lights
     from app.cli import main
 
-    monkeypatch.setattr(render.evaluation, "EVALUATE_PIXELS", 1024)
-    monkeypatch.setattr(render.evaluation, "TILE_SIDE", 16)
+    monkeypatch.setattr(render.held_out_lights, "EVALUATE_PIXELS", 1024)
+    monkeypatch.setattr(render.held_out_lights, "TILE_SIDE", 16)
     out = tmp_path / "scores.json"
     argv = ["evaluate", str(capture), "--test", str(capture), "--methods", "nearest",
             "--json", str(out), "--quiet"]  # fmt: skip
