@@ -22,7 +22,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from bench.relight import Truth, image_errors
+from bench.sim_truth import Truth, image_errors
 from core.camera_model import PinholeCamera
 from core.field_store import ReflectanceField
 from processing.panorama import Panorama

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bench.advisor import TOLERANCE, format_advisor, validate_advisor
-from bench.relight import between_view
+from bench.sim_truth import between_view
 from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.field_store import ReflectanceField

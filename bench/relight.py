@@ -2,8 +2,9 @@
 
 Run: ``python -m bench.relight -o bench-out [--quick]``. Prints tables and writes
 ``bench-out/relight.json`` and ``bench-out/relight.png`` (error against time per frame).
-Fields are simulated into ``bench-out/fields/`` once and reused. Timings are medians after
-numba compilation on this machine's cores; compare them as ratios within one run.
+Fields are simulated into ``bench-out/fields/`` once and reused (:mod:`bench.sim_truth`, with
+the ground truths and the errors against them). Timings are medians after numba compilation
+on this machine's cores (:mod:`bench.timing`); compare them as ratios within one run.
 """
 
 from __future__ import annotations
@@ -12,8 +13,6 @@ import argparse
 import json
 import resource
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, replace
 from functools import partial
 from itertools import product
 from pathlib import Path
@@ -26,11 +25,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 from numpy.typing import NDArray
 
+from bench.sim_truth import Truth, between_view, field_path, image_errors, truth_of
+from bench.timing import copy_bandwidth, loop_ms, median_ms
 from core.camera_model import PinholeCamera
 from core.field_store import ReflectanceField
-from core.light_set import grid_lights
 from core.sample_data import PANORAMA_NAMES, PanoramaName, panorama_path
-from processing.image_quality import relative_rmse_values
 from processing.panorama import Panorama, panorama_from_array, read_panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import SampleModels, choose_model, interpolation_loo
@@ -44,60 +43,13 @@ from render.relight import (
     relight_view,
 )
 from render.relight_mode import MOST_ACCURATE_MODELS, RelightEngine, RelightMode, open_relighter
-from render.relighter import Relighter, RelightSettings, RelitImage
+from render.relighter import Relighter, RelightSettings
 from render.splat import splat
-from sim.field import field_cameras, simulate_field
-from sim.ground_truth import shade_environment, shade_environment_views
-from sim.scenes import SurfaceSamples, build_scene, get_scene
-from sim.synthetic_camera import (
-    SyntheticImage,
-    camera_visibility,
-    image_of_points,
-)
-
-
-def median_ms(run: Callable[[], object], repeats: int) -> float:
-    """Median wall time of ``run()`` over ``repeats`` calls after one warm-up call, in ms."""
-    run()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times)) * 1e3
-
-
-def field_path(
-    out: Path, scene: str, cameras: int, lights: int, points: int, size: int, dtype: str
-) -> Path:
-    """Path of the simulated field of ``scene`` under ``out/fields/``, simulated if not there.
-
-    Parameters
-    ----------
-    out : Path, the benchmark's output directory
-    scene : str, a scene name of :mod:`sim.scenes`
-    cameras, lights : int, the field's camera poses (S) and lights (T)
-    points : int, surface samples
-    size : int, each camera's image side, pixels
-    dtype : str, the store's radiance dtype (``"float32"`` or ``"float16"``)
-    """
-    path = out / "fields" / f"{scene}-S{cameras}-T{lights}-{points}-{size}px-{dtype}.zarr"
-    if not path.exists():
-        layout = field_cameras(cameras, width=size, height=size)
-        simulate_field(path, scene, lights=lights, cameras=layout, points=points, dtype=dtype)
-    return path
+from sim.scenes import build_scene, get_scene
 
 
 def _read_slab(field: ReflectanceField, camera: int) -> NDArray[np.float32]:
     return np.asarray(field.radiance[camera], dtype=np.float32)
-
-
-def copy_bandwidth() -> float:
-    """Bytes per second moved by a large copy (read + write)."""
-    source = np.ones(50_000_000, dtype=np.float32)
-    target = np.empty_like(source)
-    ms = median_ms(lambda: np.copyto(target, source), 5)
-    return 2 * source.nbytes / (ms * 1e-3)
 
 
 def bench_speed(out: Path, points: int, repeats: int, panorama: Panorama) -> dict[str, Any]:
@@ -149,37 +101,6 @@ def bench_speed(out: Path, points: int, repeats: int, panorama: Panorama) -> dic
     result["slab_MB"] = field.camera_slab(0).nbytes / 1e6
     result["equation_2_vs_3"] = _bench_equations(out, panorama)
     return result
-
-
-def loop_ms(
-    relighter: RelightEngine,
-    panorama: Panorama,
-    repeats: int,
-    camera: PinholeCamera | None = None,
-) -> dict[str, float]:
-    """The interactive loop: a new lighting (rotated environment), or a new view, and render.
-
-    New views turn ``camera`` (default a 512 x 512 view at 50 degrees inclination) in azimuth;
-    a given ``camera`` is also the view of the new lightings (else the engine's current view).
-    """
-    template = camera if camera is not None else PinholeCamera(0.0, 50.0)
-    if camera is not None:
-        relighter.set_view(camera)
-    yaws = iter(np.linspace(0.0, 360.0, 1000))
-    azimuths = iter(np.linspace(0.0, 360.0, 1000))
-
-    def new_lighting() -> None:
-        relighter.set_lighting(panorama, yaw_deg=float(next(yaws)))
-        relighter.render()
-
-    def new_view() -> None:
-        relighter.set_view(replace(template, azimuth_deg=float(next(azimuths))))
-        relighter.render()
-
-    return {
-        "loop_new_lighting_ms": median_ms(new_lighting, repeats),
-        "loop_new_view_ms": median_ms(new_view, repeats),
-    }
 
 
 def _bench_scheme(
@@ -280,17 +201,6 @@ def _bench_equations(out: Path, panorama: Panorama) -> dict[str, Any]:
     }
 
 
-def between_view(cameras: list[PinholeCamera], index: int) -> PinholeCamera:
-    """A view halfway in azimuth between camera ``index`` and its ring neighbour."""
-    ring = sorted(
-        c.azimuth_deg
-        for c in cameras
-        if abs(c.inclination_deg - cameras[index].inclination_deg) < 1e-6
-    )
-    step = 360.0 / len(ring) if len(ring) > 1 else 30.0
-    return replace(cameras[index], azimuth_deg=(cameras[index].azimuth_deg + step / 2) % 360.0)
-
-
 ACCURACY_METHODS: dict[str, RelightMode] = {
     "paper (TMED on luminance, K=64, cosine 3x3, eq. 3)": RelightSettings.paper_configuration(64),
     "sampled K=256, barycentric": RelightSettings(
@@ -314,8 +224,6 @@ ACCURACY_FIELDS = [
     (30, 400, 4_000, 96),
     (400, 400, 3_000, 96),
 ]
-#: Rows of the ground truth's panorama grid (a 64 x 128 pre-filter of the panorama).
-TRUTH_GRID = 64
 
 
 def _score(
@@ -330,67 +238,6 @@ def _score(
         "render_ms": seconds * 1e3,
         "outside_fraction": image.outside_fraction,
     }
-
-
-def image_errors(image: RelitImage, truth: Truth) -> dict[str, Any]:
-    """Relative RMSE and PSNR of a relit image over the pixels both it and the truth cover.
-
-    Also the relative RMSE of its relit samples against the true ones (``sample_relative_rmse``).
-    """
-    mask = image.coverage & truth.image.coverage
-    mse = float(np.mean((image.rgb[mask] - truth.image.rgb[mask]) ** 2))
-    peak = float(truth.image.rgb[mask].max())
-    # The relit samples against the true ones: the relighting's error without the splatting's
-    # (the renderer estimates the point spacing, the simulator knows it; their splats differ).
-    shown = image.needed & truth.shown
-    return {
-        "relative_rmse": relative_rmse_values(image.rgb, truth.image.rgb, mask),
-        "sample_relative_rmse": relative_rmse_values(image.radiance, truth.radiance, shown),
-        "psnr_db": 10 * np.log10(peak**2 / mse) if mse > 0 else None,
-    }
-
-
-@dataclass(frozen=True)
-class Truth:
-    """The simulator's ground truth of one view: the image and every sample's radiance."""
-
-    image: SyntheticImage
-    radiance: NDArray[np.float64]
-    shown: NDArray[np.bool_]
-
-
-def truth_of(
-    samples: SurfaceSamples, rgb: NDArray[np.float32], camera: PinholeCamera, shadows: bool
-) -> Truth:
-    """The simulator's ground truth of ``samples`` seen from ``camera`` under the panorama ``rgb``.
-
-    The panorama is pre-filtered to a grid of lights ``TRUTH_GRID`` rows high; ``shadows``
-    casts the scene's shadows (needed when it is not convex).
-    """
-    lights = grid_lights(rgb, TRUTH_GRID)
-    radiance = shade_environment(samples, camera.position, lights, shadows=shadows)
-    image = image_of_points(samples, camera, radiance)
-    return Truth(image, radiance, camera_visibility(samples, camera))
-
-
-def truths_of_views(
-    samples: SurfaceSamples,
-    rgb: NDArray[np.float32],
-    cameras: list[PinholeCamera],
-    shadows: bool,
-) -> list[Truth]:
-    """:func:`truth_of` for several views of one lighting, sharing the shadow maps.
-
-    Shadow maps are made once for all the views (``truth_of`` would redo them per view).
-    """
-    radiances = shade_environment_views(
-        samples, [c.position for c in cameras], grid_lights(rgb, TRUTH_GRID), shadows=shadows
-    )
-    truths = []
-    for camera, radiance in zip(cameras, radiances, strict=True):
-        image = image_of_points(samples, camera, radiance)
-        truths.append(Truth(image, radiance, camera_visibility(samples, camera)))
-    return truths
 
 
 def environments(name: PanoramaName) -> dict[str, Panorama]:

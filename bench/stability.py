@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from bench.relight import image_errors, truth_of
+from bench.sim_truth import image_errors, truth_of
 from capture.dataset import Dataset, ImageKey
 from core.camera_model import PinholeCamera, RigCamera
 from core.colour import luminance

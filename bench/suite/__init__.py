@@ -118,7 +118,7 @@ def run_suite(config: SuiteConfig, out: Path, fields_dir: Path | None = None) ->
     out : Path, the output directory (ground truths are cached in ``out/truth``)
     fields_dir : Path, optional, where fields are simulated once and reused (default
         ``out/fields``; a directory named ``fields`` is required by the naming of
-        :func:`bench.relight.field_path`)
+        :func:`bench.sim_truth.field_path`)
 
     Returns
     -------

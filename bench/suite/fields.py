@@ -16,7 +16,7 @@ from typing import Any, NotRequired, TypedDict, cast
 
 import numpy as np
 
-from bench.relight import Truth, between_view, field_path, truths_of_views
+from bench.sim_truth import Truth, between_view, field_path, truths_of_views
 from bench.suite.methods import FieldSpec
 from bench.suite.results import EnvironmentRecord, FieldRecord, SpecRecord
 from core.camera_model import PinholeCamera

@@ -17,10 +17,11 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from bench.relight import Truth, image_errors, loop_ms
+from bench.sim_truth import Truth, image_errors
 from bench.suite.fields import Environment, FieldRun, spec_record
 from bench.suite.methods import FieldSpec, Method, mode_record
 from bench.suite.results import Row, Score
+from bench.timing import loop_ms
 from core.colour import linear_to_srgb
 from core.field_store import ReflectanceField
 from render.relight_mode import RelightMode, open_relighter

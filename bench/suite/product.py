@@ -19,7 +19,7 @@ from typing import cast
 import numpy as np
 
 from bench.capture import bench_capture
-from bench.relight import copy_bandwidth, field_path, loop_ms
+from bench.sim_truth import field_path
 from bench.suite.fields import FieldRun, spec_record, views_of
 from bench.suite.methods import CHAIN_K, FieldSpec, SuiteConfig, k_method, mode_record
 from bench.suite.results import (
@@ -29,6 +29,7 @@ from bench.suite.results import (
     LoopRecord,
     ProductRecord,
 )
+from bench.timing import copy_bandwidth, loop_ms
 from core.camera_model import PinholeCamera
 from core.field_store import ReflectanceField
 from core.sample_data import panorama_path
@@ -195,7 +196,7 @@ def bench_loop(
     scene : str; spec : FieldSpec; field : ReflectanceField, of them
     models : the field's per-sample model fit
     repeats : int, timed frames per time
-    bandwidth : float, bytes per second of a large copy (:func:`bench.relight.copy_bandwidth`)
+    bandwidth : float, bytes per second of a large copy (:func:`bench.timing.copy_bandwidth`)
 
     Returns
     -------
