@@ -254,3 +254,5 @@ def read_toml(path: str | os.PathLike[str], what: str) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise ConfigError(f"{target}: not valid TOML: {error}") from None
+    except RecursionError:  # arrays nested thousands deep
+        raise ConfigError(f"{target}: the {what} is nested too deeply to read") from None

@@ -339,6 +339,8 @@ def load_world(path_or_name: str | os.PathLike[str], *, variant: str = DEFAULT_V
         ) from error
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as error:
         raise InputError(f"{source}: not a valid TOML world file: {error}") from error
+    except RecursionError:  # arrays nested thousands deep
+        raise InputError(f"{source}: the world file is nested too deeply to read") from None
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
         raise InputError(f"{source}: unknown key {unknown[0]!r}; a world has {sorted(_TOP_KEYS)}")
