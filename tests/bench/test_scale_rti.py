@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.scale_rti import capture_size, make_rti_capture, run_watched
+from bench.process_watch import run_watched
+from bench.scale_rti import capture_size, make_rti_capture
 from core.colour import srgb_to_linear
 from core.errors import InputError
 from core.image_io import read_pixels
