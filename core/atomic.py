@@ -18,11 +18,9 @@ from pathlib import Path
 from typing import Any
 
 from core.errors import InputError
+from core.file_kinds import long_name_problem, name_max
 
 __all__ = ["atomic_path", "output_problem", "write_bytes_atomic", "write_json_atomic"]
-
-#: Longest file name (bytes) when the file system does not say (Linux file systems' limit).
-NAME_MAX = 255
 
 #: Why a write failed, in words, by errno (the rest say the system's words).
 _WRITE_FAILURES = {
@@ -32,13 +30,6 @@ _WRITE_FAILURES = {
     errno.EROFS: "the file system is read-only; choose another place",
     errno.EACCES: "permission denied; choose another place",
 }
-
-
-def _name_max(folder: Path) -> int:
-    try:
-        return int(os.pathconf(folder, "PC_NAME_MAX"))
-    except (OSError, ValueError):
-        return NAME_MAX
 
 
 def _path_problem(target: Path, error: OSError) -> str:
@@ -77,14 +68,9 @@ def output_problem(path: str | os.PathLike[str], *, directory: bool = False) -> 
 
 
 def _output_problem(target: Path, directory: bool) -> str | None:
-    longest = _name_max(next((p for p in target.parents if os.path.isdir(p)), Path(".")))
-    for part in target.parts:
-        size = len(os.fsencode(part))
-        if size > longest:
-            return (
-                f"{target}: the name {part[:24]}... is {size} bytes long, the file system "
-                f"allows {longest}; choose a shorter name"
-            )
+    too_long = long_name_problem(target)
+    if too_long is not None:
+        return too_long
     nearest = Path(".")
     for parent in reversed(target.parents):
         found = _status(parent)
@@ -141,7 +127,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
         target.parent.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         raise InputError(f"{target}: cannot create its folder: {error.strerror}") from None
-    temporary = _temporary(target, _name_max(target.parent))
+    temporary = _temporary(target, name_max(target.parent))
     try:
         try:
             yield temporary

@@ -68,6 +68,7 @@ from PIL import Image, UnidentifiedImageError
 from core.atomic import write_bytes_atomic
 from core.colour import linear_to_srgb, srgb_to_linear
 from core.errors import InputError
+from core.file_kinds import read_regular_bytes, special_file_problem
 
 __all__ = [
     "EXR_SUFFIXES",
@@ -150,6 +151,9 @@ def read_pixels(path: str | os.PathLike[str]) -> NDArray[Any]:
         raise ImageFileError(
             f"{file}: unknown image format {suffix!r}; use one of {sorted(READABLE_SUFFIXES)}"
         )
+    problem = special_file_problem(file)  # a FIFO would block the reader forever
+    if problem is not None:
+        raise ImageFileError(problem)
     if file.is_dir():
         raise ImageFileError(f"{file}: is a directory, not an image file")
     if not file.is_file():
@@ -374,7 +378,7 @@ def _read_tga(file: Path) -> NDArray[np.uint8]:
 
 
 def _read_with_opencv(file: Path) -> NDArray[Any]:
-    data = file.read_bytes()
+    data = read_regular_bytes(file)
     suffix = file.suffix.lower()
     # OpenCV decodes a truncated JPEG without complaint; the end-of-image marker tells.
     if suffix in _JPEG_SUFFIXES and data.rfind(b"\xff\xd9", max(0, len(data) - 4096)) < 0:

@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from core.directions import normalize
 from core.errors import DatasetError, InputError
+from core.file_kinds import special_file_problem
 from core.point_spacing import point_spacing
 
 __all__ = ["PointCloud", "read_point_cloud"]
@@ -74,6 +75,9 @@ def read_point_cloud(path: str | os.PathLike[str]) -> PointCloud:
         Unreadable, truncated or missing the needed arrays or properties; names the file.
     """
     file = Path(path)
+    problem = special_file_problem(file)  # a FIFO would block the read forever
+    if problem is not None:
+        raise DatasetError(problem)
     if not file.is_file():
         raise DatasetError(f"{file}: no such point cloud file")
     suffix = file.suffix.lower()
@@ -105,6 +109,29 @@ _PLY_TYPES = {
 }  # fmt: skip
 
 
+def _check_vertex_count(
+    file: Path, encoding: str, count: int, properties: int, left: int, *, record: int
+) -> None:
+    """Refuse a vertex count the bytes after the header cannot hold, before reading any.
+
+    A header claiming 99,999,999,999 vertices over one line of data looped over the claim
+    (ASCII) or asked for terabytes (binary). An ASCII vertex takes at least two bytes per
+    property (a digit and a space or newline), a binary one its record's size.
+    """
+    if properties == 0:
+        raise DatasetError(f"{file}: the PLY vertex element has no properties")
+    if count < 0:
+        raise DatasetError(f"{file}: the PLY header claims {count} vertices")
+    # The last ASCII vertex may end without its newline.
+    least, slack = (2 * properties, 1) if encoding == "ascii" else (record, 0)
+    if count * least - slack > left:
+        raise DatasetError(
+            f"{file}: PLY vertex data is truncated: the header claims {count} vertices, the "
+            f"{left} bytes after it hold at most {(left + slack) // least} (or the header is "
+            "wrong)"
+        )
+
+
 def _read_ply_vertices(file: Path) -> dict[str, NDArray[np.float64]]:
     with open(file, "rb") as handle:
         if handle.readline().strip() != b"ply":
@@ -132,6 +159,9 @@ def _read_ply_vertices(file: Path) -> dict[str, NDArray[np.float64]]:
                     raise DatasetError(f"{file}: unsupported vertex property {' '.join(words[1:])}")
                 types.append(_PLY_TYPES[words[1]])
                 names.append(words[2])
+        left = os.fstat(handle.fileno()).st_size - handle.tell()
+        record = sum(np.dtype(kind).itemsize for kind in types)
+        _check_vertex_count(file, encoding, count, len(names), left, record=record)
         if encoding == "ascii":
             rows = [handle.readline().split()[: len(names)] for _ in range(count)]
             if any(len(row) < len(names) for row in rows):

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
+import select
 import signal
 import sys
 import threading
@@ -23,6 +25,7 @@ from collections.abc import Iterator, Sequence
 from types import FrameType
 
 from app.cli.advise import add_advise
+from app.cli.args import check_file_arguments
 from app.cli.batch import add_batch
 from app.cli.bench import add_bench_parser
 from app.cli.calibrate import add_calibrate
@@ -83,8 +86,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as leaving:  # argparse's error (2) and --help (0)
         return leaving.code if isinstance(leaving.code, int) else 2
+    except BrokenPipeError:  # --help into a closed pipe
+        if not _stdout_gone():
+            raise
+        _silence_stdout()
+        return 128 + signal.SIGPIPE
     with _unwind_on_sigterm() as received:
         try:
+            check_file_arguments(args)  # a FIFO or a device would block or never end
             status: int = args.handler(args)
         except RigError as error:
             print(f"rig {args.command}: error: {error}", file=sys.stderr)
@@ -94,7 +103,34 @@ def main(argv: Sequence[str] | None = None) -> int:
             word = "terminated" if number == signal.SIGTERM else "interrupted"
             print(f"rig {args.command}: {word}", file=sys.stderr)
             return 128 + number
+        except BrokenPipeError:
+            if not _stdout_gone():
+                raise
+            # What reads the output stopped reading (`rig sim scenes --json | head -1`): stop
+            # quietly, as a command ended by SIGPIPE does; nothing more can reach it.
+            _silence_stdout()
+            return 128 + signal.SIGPIPE
     return status
+
+
+def _stdout_gone() -> bool:
+    """Whether standard output is a pipe whose reader has closed it."""
+    try:
+        descriptor = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # replaced (a test's capture), or closed
+        return False
+    poller = select.poll()
+    poller.register(descriptor, select.POLLOUT)
+    return any(events & select.POLLERR for _, events in poller.poll(0))
+
+
+def _silence_stdout() -> None:
+    """Point standard output at /dev/null: the interpreter's final flush has nowhere to fail."""
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, sys.stdout.fileno())
+    finally:
+        os.close(null)
 
 
 @contextlib.contextmanager

@@ -17,6 +17,7 @@ from typing import Any
 
 from core.atomic import output_problem
 from core.errors import InputError
+from core.file_kinds import special_file_problem
 from core.memory_budget import available_memory, parse_size
 
 __all__ = [
@@ -25,6 +26,7 @@ __all__ = [
     "MAX_IMAGE_SIDE",
     "add_camera_options",
     "angles",
+    "check_file_arguments",
     "count",
     "finite",
     "image_size",
@@ -174,6 +176,27 @@ def require_output(path: Path, *, directory: bool = False) -> Path:
     if problem is not None:
         raise InputError(problem)
     return path
+
+
+def check_file_arguments(args: argparse.Namespace) -> None:
+    """Refuse every argument that names a FIFO, a device or a socket, before any is opened.
+
+    The one check where the command line reads its files: ``--config`` naming a FIFO blocked
+    forever in ``open``, ``/dev/zero`` never ends, and an output there would be replaced by a
+    file. Paths (and lists of them) and strings naming such a file are checked; a path that
+    does not exist is left to the command, whose message says what it wanted.
+
+    Raises
+    ------
+    InputError
+        Naming the argument's path and what it is (:func:`core.file_kinds.special_file_problem`).
+    """
+    for value in vars(args).values():
+        for item in value if isinstance(value, list | tuple) else (value,):
+            if isinstance(item, Path | str) and item != "":
+                problem = special_file_problem(item)
+                if problem is not None:
+                    raise InputError(problem)
 
 
 def output_file(text: str) -> Path:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import io
 import itertools
+import os
 import re
 import shutil
 import signal
@@ -128,7 +129,8 @@ def run_case(case: Case, workspace: Workspace, tmp: Path) -> Outcome:
     outputs = [
         Path(value)
         for flag, value in itertools.pairwise(argv)
-        if flag in OUTPUT_FLAGS and value.startswith(str(tmp)) and not Path(value).exists()
+        # (lexists: False, not an error, for a name too long or a loop of links)
+        if flag in OUTPUT_FLAGS and value.startswith(str(tmp)) and not os.path.lexists(value)
     ]
     out, err = io.StringIO(), io.StringIO()
     previous = signal.signal(signal.SIGALRM, _on_alarm)
@@ -154,7 +156,7 @@ def run_case(case: Case, workspace: Workspace, tmp: Path) -> Outcome:
     # A progress bar redraws its last state on closing: that is not a message said twice.
     said = [line for line in said if not re.search(r"\d+%\|", line)]
     repeated = [line for line, n in Counter(said).items() if n > 1 and line.strip()]
-    left = [str(path) for path in outputs if path.exists() and case.status != 0]
+    left = [str(path) for path in outputs if os.path.lexists(path) and case.status != 0]
     left += [str(path) for path in tmp.rglob("*.partial*")]
     if status != case.status or missing or repeated or left:
         detail = f"status {status}, missing {missing}, repeated {repeated}, left behind {left}"
@@ -385,6 +387,40 @@ ALTERED_ATTRIBUTES: tuple[tuple[str, str, object, str], ...] = (
     ("radiance_digest a number", "radiance_digest", 5, "attribute radiance_digest is 5"),
     ("cameras a string", "cameras", "abc", "attribute cameras is 'abc'"),
 )
+
+
+def a_link_loop(workspace: Workspace, tmp: Path) -> None:
+    """``loop``: a symbolic link to itself, where an output or its folder is named."""
+    (tmp / "loop").symlink_to("loop")
+
+
+def fifos(workspace: Workspace, tmp: Path) -> None:
+    """FIFOs (named pipes) where files are wanted: ``fifo.toml``, ``fifo.exr``, ``fifo.lp``.
+
+    Nothing ever writes into them: a reader that opens one waits forever.
+    """
+    for name in ("fifo.toml", "fifo.exr", "fifo.lp"):
+        os.mkfifo(tmp / name)
+
+
+def claiming_plys(workspace: Workspace, tmp: Path) -> None:
+    """PLY files whose header claims far more vertices than they hold (one each).
+
+    ``ascii.ply`` claims 99,999,999,999 (a reader looped over the claim), ``binary.ply``
+    10^12 (a reader asked for terabytes).
+    """
+    properties = "".join(f"property float {n}\n" for n in ("x", "y", "z", "nx", "ny", "nz"))
+    for name, encoding, count, body in (
+        ("ascii.ply", "ascii", 99_999_999_999, b"0 0 0 0 0 1\n"),
+        ("binary.ply", "binary_little_endian", 10**12, bytes(24)),
+    ):
+        header = f"ply\nformat {encoding} 1.0\nelement vertex {count}\n{properties}end_header\n"
+        (tmp / name).write_bytes(header.encode() + body)
+
+
+def deep_toml(workspace: Workspace, tmp: Path) -> None:
+    """``deep.toml``: an array nested :data:`DEEP` levels deep (a config, plan or world)."""
+    (tmp / "deep.toml").write_text("a = " + "[" * DEEP + "]" * DEEP + "\n")
 
 
 def garbage_models(workspace: Workspace, tmp: Path) -> None:
@@ -807,6 +843,144 @@ def _cases() -> list[Case]:
             stdout=True,
         )
     )
+    # TOML nested 200,000 deep (tomllib recursed until RecursionError)
+    cases += [
+        Case(
+            "plan: a config nested 200,000 deep",
+            ("plan", "--config", "{tmp}/deep.toml", "--plan", "docs/plan.example.toml"),
+            ("deep.toml", "rig config is nested too deeply"),
+            prepare=deep_toml,
+        ),
+        Case(
+            "plan: a plan nested 200,000 deep",
+            ("plan", "--config", "docs/rig.example.toml", "--plan", "{tmp}/deep.toml"),
+            ("deep.toml", "plan is nested too deeply"),
+            prepare=deep_toml,
+        ),
+        Case(
+            "sim rti: a world nested 200,000 deep",
+            ("sim", "rti", "--scene", "{tmp}/deep.toml", "-o", "{tmp}/d"),
+            ("deep.toml", "world file is nested too deeply"),
+            prepare=deep_toml,
+        ),
+    ]
+    # outputs no file system can name
+    long_name = "{tmp}/" + "a" * 256 + ".png"
+    cases += [
+        Case(
+            "relight: -o a 256-byte name",
+            (*relight, "-o", long_name),
+            ("a" * 24, "260 bytes long", "choose a shorter name"),
+        ),
+        Case(
+            "relight: -o through a symlink loop",
+            (*relight, "-o", "{tmp}/loop/r.png"),
+            ("loop/r.png", "loop of symbolic links"),
+            prepare=a_link_loop,
+        ),
+        Case(
+            "relight: -o a symlink loop",
+            (*relight, "-o", "{tmp}/loop"),
+            ("loop", "loop of symbolic links"),
+            prepare=a_link_loop,
+        ),
+        Case(
+            "sample: -o a symlink loop",
+            ("sample", pano, "-o", "{tmp}/loop"),
+            ("loop", "loop of symbolic links"),
+            prepare=a_link_loop,
+        ),
+        Case(
+            "sim photo: -o a 256-byte name",
+            (*photo, "-o", long_name),
+            ("260 bytes long", "choose a shorter name"),
+        ),
+    ]
+    # files that never answer: FIFOs and devices where a file is wanted, PLY counts
+    fifo = "is a FIFO (named pipe), not a regular file"
+    cases += [
+        Case(
+            "plan: --config a FIFO",
+            ("plan", "--config", "{tmp}/fifo.toml", "--plan", "docs/plan.example.toml"),
+            ("fifo.toml", fifo),
+            prepare=fifos,
+        ),
+        Case(
+            "doctor: --config a FIFO",
+            ("doctor", "--config", "{tmp}/fifo.toml"),
+            ("fifo.toml", fifo),
+            prepare=fifos,
+        ),
+        Case(
+            "capture: --config a FIFO",
+            (
+                "capture",
+                "--config",
+                "{tmp}/fifo.toml",
+                "--plan",
+                "docs/plan.example.toml",
+                "-o",
+                "{tmp}/d",
+            ),
+            ("fifo.toml", fifo),
+            prepare=fifos,
+        ),
+        Case(
+            "relight: --env a FIFO",
+            (
+                "relight",
+                "{field}",
+                "--env",
+                "{tmp}/fifo.exr",
+                "--view",
+                "20,40",
+                "-o",
+                "{tmp}/r.png",
+            ),
+            ("fifo.exr", fifo),
+            prepare=fifos,
+        ),
+        Case(
+            "relight: --env /dev/zero",
+            ("relight", "{field}", "--env", "/dev/zero", "--view", "20,40", "-o", "{tmp}/r.png"),
+            ("/dev/zero: is a character device",),
+        ),
+        Case(
+            "relight: -o /dev/null",
+            (*relight, "-o", "/dev/null"),
+            ("/dev/null: is a character device",),
+        ),
+        Case(
+            "sample: a FIFO panorama",
+            ("sample", "{tmp}/fifo.exr", "-o", "{tmp}/s"),
+            ("fifo.exr", fifo),
+            prepare=fifos,
+        ),
+        Case(
+            "evaluate: --test a FIFO",
+            ("evaluate", "{field}", "--test", "{tmp}/fifo.lp", "--quiet"),
+            ("fifo.lp", fifo),
+            prepare=fifos,
+        ),
+        Case(
+            "sim rti: --scene a FIFO",
+            ("sim", "rti", "--scene", "{tmp}/fifo.toml", "-o", "{tmp}/d"),
+            ("fifo.toml", fifo),
+            prepare=fifos,
+        ),
+        Case(
+            "process: a PLY claiming 99,999,999,999 vertices",
+            ("process", "{dataset}", "-o", "{tmp}/f.zarr", "--points", "{tmp}/ascii.ply"),
+            ("ascii.ply", "claims 99999999999 vertices", "hold at most 1"),
+            prepare=claiming_plys,
+        ),
+        Case(
+            "process: a binary PLY claiming 10^12 vertices",
+            ("process", "{dataset}", "-o", "{tmp}/f.zarr", "--points", "{tmp}/binary.ply"),
+            ("binary.ply", "claims 1000000000000 vertices", "hold at most 1"),
+            prepare=claiming_plys,
+        ),
+    ]
     # rig verify
     cases += [
         Case("verify: missing path", ("verify", "{tmp}/none"), ("none", "no such")),

@@ -6,7 +6,11 @@ its status and a message naming the file or value (the README's promise).
 
 from __future__ import annotations
 
+import os
 import shutil
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +19,7 @@ import pytest
 from app.cli import main
 from core.image_io import ImageFileError, read_linear, write_exr
 from tests.app.bad_inputs import CASES, Case, Workspace, build_workspace, run_case
+from tests.full_disk import ROOT, run_limited
 
 
 @pytest.fixture(scope="module")
@@ -72,3 +77,59 @@ def test_a_torn_journal_is_reported_once_by_a_resume(
     assert len(warnings) == 1 and "removed" in warnings[0].getMessage()
     assert main(["verify", str(dataset)]) == 0
     assert "unfinished" not in capsys.readouterr().out
+
+
+# --- what only a process of its own can show: a full disk, a closed pipe, a FIFO ------------
+
+#: The installed ``rig`` command beside this interpreter.
+RIG = str(Path(sys.executable).with_name("rig"))
+
+
+def test_a_full_disk_keeps_the_relit_image_already_there(
+    workspace: Workspace, tmp_path: Path
+) -> None:
+    # Issue 28: on a full disk `rig relight ... -o r.png` printed "-> r.png", exited 0 and
+    # left an empty r.png in place of the valid one (OpenCV's imwrite reports no failure).
+    target = tmp_path / "r.png"
+    argv = ["relight", str(workspace.field), "--env", str(workspace.panorama), "--view", "20,40",
+            "--size", "48x48", "-o", str(target)]  # fmt: skip
+    assert main(argv) == 0
+    before = target.read_bytes()
+    assert len(before) > 600
+    done = run_limited([RIG, *argv], limit=600)
+    assert done.returncode == 2, done.stderr
+    assert f"rig relight: error: {target}: cannot write: the file is larger" in done.stderr
+    assert "the earlier file is kept as it was" in done.stderr
+    assert "Traceback" not in done.stderr and "->" not in done.stdout
+    assert target.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["r.png"]
+
+
+@pytest.mark.parametrize("argv", [("sim", "scenes", "--json"), ("sim", "scenes")])
+def test_output_into_a_closed_pipe_ends_quietly(argv: tuple[str, ...]) -> None:
+    # `rig sim scenes --json | head -1` ended in a BrokenPipeError traceback.
+    reading, writing = os.pipe()
+    os.close(reading)  # the reader is gone before the first line
+    try:
+        done = subprocess.run(
+            [RIG, *argv], stdout=writing, stderr=subprocess.PIPE, text=True, timeout=120,
+            check=False,
+        )  # fmt: skip
+    finally:
+        os.close(writing)
+    assert (done.returncode, done.stderr) == (128 + signal.SIGPIPE, "")
+
+
+def test_a_config_that_is_a_fifo_is_refused_not_waited_on(tmp_path: Path) -> None:
+    # `--config` naming a FIFO blocked forever in open(): nothing writes into it here either.
+    fifo = tmp_path / "rig.toml"
+    os.mkfifo(fifo)
+    done = subprocess.run(
+        [RIG, "plan", "--config", str(fifo), "--plan", "docs/plan.example.toml"],
+        cwd=ROOT, capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    assert done.returncode == 2
+    assert done.stderr == (
+        f"rig plan: error: {fifo}: is a FIFO (named pipe), not a regular file; name a regular "
+        "file\n"
+    )

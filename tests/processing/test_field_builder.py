@@ -10,6 +10,8 @@ from typing import Any
 import numpy as np
 import pytest
 import tifffile
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from numpy.typing import NDArray
 
 from capture.dataset import Dataset, ImageKey
@@ -330,6 +332,68 @@ def test_point_clouds_read_from_npz_and_ply(tmp_path: Path) -> None:
     with pytest.raises(DatasetError, match=r"cloud.xyz"):
         (tmp_path / "cloud.xyz").write_text("0 0 0")
         read_point_cloud(tmp_path / "cloud.xyz")
+
+
+_PLY_PROPERTIES = "".join(f"property float {n}\n" for n in ("x", "y", "z", "nx", "ny", "nz"))
+
+
+def _ply(encoding: str, claimed: int | str, vertices: NDArray[np.floating]) -> bytes:
+    header = f"ply\nformat {encoding} 1.0\nelement vertex {claimed}\n{_PLY_PROPERTIES}end_header\n"
+    if encoding == "ascii":
+        body = "".join(" ".join(f"{v:.7g}" for v in row) + "\n" for row in vertices).encode()
+    else:
+        body = vertices.astype("<f4").tobytes()
+    return header.encode() + body
+
+
+_UP = np.array([[0.0, 0.0, 0.0, 0.0, 0.0, 1.0], [1.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+                [0.0, 1.0, 0.0, 0.0, 0.0, 1.0]])  # fmt: skip
+
+
+@pytest.mark.parametrize("encoding", ["ascii", "binary_little_endian"])
+def test_a_ply_claiming_far_more_vertices_than_it_holds_is_refused_at_once(
+    tmp_path: Path, encoding: str
+) -> None:
+    # ASCII looped over the 99,999,999,999 claimed rows; binary asked for terabytes.
+    path = tmp_path / "claims.ply"
+    path.write_bytes(_ply(encoding, 99_999_999_999, _UP[:1]))
+    with pytest.raises(DatasetError, match=r"claims.ply: PLY vertex data is truncated: the "
+                       r"header claims 99999999999 vertices, the \d+ bytes after it hold at "
+                       r"most 1 "):  # fmt: skip
+        read_point_cloud(path)
+
+
+@pytest.mark.parametrize(("claimed", "words"), [(-3, "claims -3 vertices"),
+                                                ("x", "cannot read the point cloud")])  # fmt: skip
+def test_a_ply_count_that_is_no_count_is_refused(
+    tmp_path: Path, claimed: int | str, words: str
+) -> None:
+    path = tmp_path / "bad.ply"
+    path.write_bytes(_ply("binary_little_endian", claimed, _UP))
+    with pytest.raises(DatasetError, match=words):
+        read_point_cloud(path)
+
+
+@settings(max_examples=40, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    encoding=st.sampled_from(["ascii", "binary_little_endian"]),
+    held=st.integers(2, 3),
+    claimed=st.integers(0, 10) | st.integers(10**6, 10**15),
+)
+def test_a_ply_is_read_when_it_holds_its_claim_and_refused_when_it_holds_less(
+    tmp_path: Path, encoding: str, held: int, claimed: int
+) -> None:
+    path = tmp_path / "cloud.ply"
+    path.write_bytes(_ply(encoding, claimed, _UP[:held]))
+    if claimed > held:
+        with pytest.raises(DatasetError, match="PLY vertex data is truncated"):
+            read_point_cloud(path)
+    elif claimed >= 2:  # fewer rows than written: the first ones (a point cloud needs 2)
+        cloud = read_point_cloud(path)
+        np.testing.assert_array_equal(cloud.points, _UP[:claimed, :3])
+    else:
+        with pytest.raises(DatasetError):
+            read_point_cloud(path)
 
 
 def test_a_build_on_a_local_cluster_is_the_same_store(tmp_path: Path) -> None:
