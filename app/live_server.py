@@ -428,7 +428,10 @@ async def _frame_file(request: web.Request) -> web.Response:
         _, body = encode_picture(frame.picture, ".png")
     else:
         path = Path(tempfile.mkdtemp(dir=viewer.uploads)) / "frame.exr"
-        write_image(path, frame.image.rgb, frame.image.coverage)
+        try:
+            write_image(path, frame.image.rgb, frame.image.coverage)
+        except RigError as error:  # a full disk: the write is checked
+            raise _error(web.HTTPInsufficientStorage, str(error)) from None
         body = path.read_bytes()
     return web.Response(
         body=body,

@@ -22,17 +22,16 @@ Frames and pixels (``docs/calibration.md``):
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from core.atomic import write_json_atomic
 from core.calibrated_camera import (
     CalibratedCamera,
     CameraPose,
@@ -276,4 +275,4 @@ class Calibration:
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write :meth:`to_dict` as JSON (for calibration kept outside a dataset)."""
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+        write_json_atomic(path, self.to_dict())  # checked and atomic

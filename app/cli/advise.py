@@ -6,7 +6,6 @@ Application layer (like the rest of :mod:`app.cli`); the predictions are :mod:`r
 from __future__ import annotations
 
 import argparse
-import json
 from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -92,6 +91,8 @@ def _run_advise(args: argparse.Namespace) -> int:
     advice, _ = run_advisor(args.field, args.env, args.tolerance, args.samples)
     print(advice.format())
     if args.json is not None:
-        args.json.write_text(json.dumps(advice_json(advice), indent=2) + "\n")
+        from core.atomic import write_json_atomic
+
+        write_json_atomic(args.json, advice_json(advice))  # checked: a full disk is an error
         print(f"predictions -> {args.json}")
     return 0 if advice.choice is not None else 1

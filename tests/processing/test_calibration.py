@@ -4,6 +4,7 @@ intensities recovered from rendered ChArUco boards, mirror spheres and white tar
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,6 +28,7 @@ from sim.calibration_targets import (
     render_white_target,
 )
 from sim.sensor import Sensor
+from tests.full_disk import writes_under_limit
 
 TARGET = ChArUcoTarget()
 LENS = LensDistortion(-0.12, 0.05)
@@ -232,3 +234,19 @@ def test_pinhole_camera_rays_and_projection_agree() -> None:
     rays = calibrated.rays(col, row)
     towards = points - camera.position
     assert np.degrees(angle_between(rays, towards)).max() < 1e-6
+
+
+def test_saving_a_calibration_on_a_full_disk_keeps_the_old_file(tmp_path: Path) -> None:
+    # Written checked and atomically (a child under a real file size limit, tests/full_disk.py).
+    target = tmp_path / "calibration.json"
+    Calibration().save(target)
+    before = target.read_bytes()
+    lights = ", ".join(f"LightCalibration(({i / 100}, 0.0, 1.0))" for i in range(50))
+    found = writes_under_limit(
+        "from processing.calibration import Calibration, LightCalibration\n"
+        f"attempt('save', lambda: Calibration(lights=({lights},)).save({str(target)!r}))\n",
+        limit=len(before) + 10,
+    )["save"]
+    assert found["project"] and found["message"].startswith(f"{target}: cannot write"), found
+    assert target.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["calibration.json"]
