@@ -20,7 +20,13 @@ from typing import Any
 from core.errors import InputError
 from core.file_kinds import long_name_problem, name_max
 
-__all__ = ["atomic_path", "output_problem", "write_bytes_atomic", "write_json_atomic"]
+__all__ = [
+    "atomic_path",
+    "output_problem",
+    "write_bytes_atomic",
+    "write_json_atomic",
+    "write_problem",
+]
 
 #: Why a write failed, in words, by errno (the rest say the system's words).
 _WRITE_FAILURES = {
@@ -103,7 +109,9 @@ def _temporary(target: Path, longest: int) -> Path:
     return target.with_name(f".{stem}{tail}")
 
 
-def _write_problem(target: Path, error: OSError) -> str:
+def write_problem(target: str | os.PathLike[str], error: OSError) -> str:
+    """Why writing ``target`` failed, in words (a full disk, a size limit, a quota...)."""
+    target = Path(target)
     why = _WRITE_FAILURES.get(error.errno or 0, error.strerror or str(error))
     kept = "the earlier file is kept as it was" if target.exists() else "nothing was written"
     return f"{target}: cannot write: {why} ({kept})"
@@ -137,7 +145,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
                 os.fsync(handle.fileno())  # a write the disk cannot hold fails here at last
             os.replace(temporary, target)
         except OSError as error:  # a full disk, a size limit, a folder made there meanwhile
-            raise InputError(_write_problem(target, error)) from None
+            raise InputError(write_problem(target, error)) from None
     finally:
         temporary.unlink(missing_ok=True)
     # The rename is durable only once the directory entry is on disk.

@@ -30,10 +30,11 @@ creation time...).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal, get_args
@@ -43,6 +44,7 @@ import zarr
 from numpy.typing import NDArray
 from zarr.core.array_spec import ArrayConfigParams
 
+from core.atomic import write_problem
 from core.camera_model import PinholeCamera
 from core.errors import DatasetError, InputError
 from core.field_attributes import check_directions, direction_problem, read_attributes
@@ -174,46 +176,64 @@ class FieldStoreWriter:
         _check_target(self.path, overwrite)
         self.partial = self.path.with_name(f".{self.path.name}.{os.getpid()}.partial")
         shutil.rmtree(self.partial, ignore_errors=True)
-        try:
-            self.group = zarr.open_group(str(self.partial), mode="w")
-        except Exception as error:  # zarr raises several types for unwritable paths
-            raise DatasetError(f"{path}: cannot create the field store: {error}") from error
-        self._slab_digests: dict[tuple[int, int], bytes] = {}
-        self._camera_peaks = np.zeros(s)
-        self._visibility_written: set[int] = set()
-        # Every chunk is written, even one equal to the fill value (a black image, a camera
-        # that sees nothing): a chunk that is not there is damage, never data.
-        every_chunk: ArrayConfigParams = {"write_empty_chunks": True}
-        self.radiance = self.group.create_array(
-            "radiance", shape=(s, t, p, 3), chunks=(1, 1, min(p, sample_chunk), 3),
-            dtype=dtype, fill_value=0.0,
-            config=every_chunk,
-        )  # fmt: skip
-        self.visibility = self.group.create_array(
-            "visibility", shape=(s, p), chunks=(1, p), dtype="bool", fill_value=False,
-            config=every_chunk,
-        )  # fmt: skip
-        constants: dict[str, NDArray[Any]] = {
-            "light_directions": np.asarray(light_directions, dtype=np.float64),
-            "camera_directions": np.array([c.direction for c in cameras], dtype=np.float64),
-        }
-        if points is not None:
-            constants["points"] = np.asarray(points, dtype=np.float32)
-        if normals is not None:
-            constants["normals"] = np.asarray(normals, dtype=np.float32)
-        for name, values in constants.items():
-            self.group.create_array(
-                name, shape=values.shape, dtype=values.dtype, config=every_chunk
-            )[...] = values
-        self.group.attrs.update(
-            {
-                "schema_version": FIELD_SCHEMA_VERSION,
-                "samples": samples,
-                "cameras": [asdict(c) for c in cameras],
-                "light_model": light_model or {"type": "directional", "irradiance": 1.0},
-                "provenance": provenance or {},
+        with self._writing(any_error=True):  # a failure leaves no partial store
+            try:
+                self.group = zarr.open_group(str(self.partial), mode="w")
+            except Exception as error:  # zarr raises several types for unwritable paths
+                raise DatasetError(f"{path}: cannot create the field store: {error}") from error
+            self._slab_digests: dict[tuple[int, int], bytes] = {}
+            self._camera_peaks = np.zeros(s)
+            self._visibility_written: set[int] = set()
+            # Every chunk is written, even one equal to the fill value (a black image, a camera
+            # that sees nothing): a chunk that is not there is damage, never data.
+            every_chunk: ArrayConfigParams = {"write_empty_chunks": True}
+            self.radiance = self.group.create_array(
+                "radiance", shape=(s, t, p, 3), chunks=(1, 1, min(p, sample_chunk), 3),
+                dtype=dtype, fill_value=0.0,
+                config=every_chunk,
+            )  # fmt: skip
+            self.visibility = self.group.create_array(
+                "visibility", shape=(s, p), chunks=(1, p), dtype="bool", fill_value=False,
+                config=every_chunk,
+            )  # fmt: skip
+            constants: dict[str, NDArray[Any]] = {
+                "light_directions": np.asarray(light_directions, dtype=np.float64),
+                "camera_directions": np.array([c.direction for c in cameras], dtype=np.float64),
             }
-        )
+            if points is not None:
+                constants["points"] = np.asarray(points, dtype=np.float32)
+            if normals is not None:
+                constants["normals"] = np.asarray(normals, dtype=np.float32)
+            for name, values in constants.items():
+                self.group.create_array(
+                    name, shape=values.shape, dtype=values.dtype, config=every_chunk
+                )[...] = values
+            self.group.attrs.update(
+                {
+                    "schema_version": FIELD_SCHEMA_VERSION,
+                    "samples": samples,
+                    "cameras": [asdict(c) for c in cameras],
+                    "light_model": light_model or {"type": "directional", "irradiance": 1.0},
+                    "provenance": provenance or {},
+                }
+            )
+
+    @contextlib.contextmanager
+    def _writing(self, *, any_error: bool = False) -> Iterator[None]:
+        """A write into the partial store: a failed one (a full disk) names the store.
+
+        The partial store is removed on a failed write (or, with ``any_error``, on any
+        error), so a full disk leaves no ``.NAME.PID.partial`` behind.
+        """
+        try:
+            yield
+        except OSError as error:
+            self.abort()
+            raise InputError(write_problem(self.path, error)) from None
+        except BaseException:
+            if any_error:
+                self.abort()
+            raise
 
     def write_slab(self, camera: int, light: int, radiance: NDArray[np.floating]) -> None:
         """Store the radiance (P, 3) of every sample for one camera and one light.
@@ -244,7 +264,8 @@ class FieldStoreWriter:
     def write_visibility(self, camera: int, visible: NDArray[np.bool_]) -> None:
         """Store which samples (P,) camera ``camera`` sees."""
         seen = np.asarray(visible, dtype=bool)
-        self.visibility[camera] = seen
+        with self._writing():
+            self.visibility[camera] = seen
         self._visibility_written.add(camera)
         if not seen.any():
             self._camera_peaks[camera] = -1.0  # sees nothing: dark whatever its slabs hold
@@ -272,10 +293,12 @@ class FieldStoreWriter:
                 f"{self.path}: {len(missing)} slabs were never written ({', '.join(missing[:5])}"
                 f"{', ...' if len(missing) > 5 else ''}); the store was not made"
             )
-        self.group.attrs["dark_cameras"] = [int(s) for s in np.flatnonzero(self._camera_peaks <= 0)]
-        self.group.attrs["radiance_digest"] = radiance_digest(
-            self._slab_digests[key] for key in sorted(self._slab_digests)
-        )
+        dark = [int(s) for s in np.flatnonzero(self._camera_peaks <= 0)]
+        with self._writing():
+            self.group.attrs["dark_cameras"] = dark
+            self.group.attrs["radiance_digest"] = radiance_digest(
+                self._slab_digests[key] for key in sorted(self._slab_digests)
+            )
         _check_target(self.path, self.overwrite)
         if self.path.exists():
             shutil.rmtree(self.path)
@@ -341,7 +364,10 @@ def _store_slab(
             f"NaN or infinite in {array.dtype} (the first at sample {found[1][0]}); "
             "the store keeps finite light only: check the images and calibration"
         )
-    array[camera, light] = values
+    try:
+        array[camera, light] = values
+    except OSError as error:  # a full disk
+        raise InputError(write_problem(where, error)) from None
     return slab_digest(values), float(values.max()) if values.size else 0.0
 
 

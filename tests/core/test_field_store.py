@@ -13,6 +13,7 @@ from core.errors import DatasetError, InputError
 from core.field_integrity import check_store
 from core.field_store import FieldStoreWriter, ReflectanceField
 from sim.field import field_cameras, simulate_field
+from tests.full_disk import writes_under_limit
 
 
 @pytest.fixture(scope="module")
@@ -243,3 +244,30 @@ def test_the_writer_refuses_directions_that_are_not_unit_vectors(tmp_path: Path)
             cameras=[PinholeCamera(0.0, 30.0, width=4, height=4)], image_shape=(2, 3),
         )  # fmt: skip
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_leaves_no_partial_store_and_keeps_the_old_one(
+    store: Path, tmp_path: Path
+) -> None:
+    # On a full disk `rig sim field` and `rig process` stopped with OSError 28 and left
+    # .NAME.PID.partial stores (a child under a real file size limit, tests/full_disk.py).
+    kept = tmp_path / "kept.zarr"
+    shutil.copytree(store, kept)
+    before = sorted((p.relative_to(kept), p.read_bytes()) for p in kept.rglob("*") if p.is_file())
+    found = writes_under_limit(
+        f"""
+from sim.field import field_cameras, simulate_field
+cameras = field_cameras(2, width=16, height=16)
+for name, overwrite in (("new.zarr", False), ("kept.zarr", True)):
+    attempt(name, lambda name=name, overwrite=overwrite: simulate_field(
+        {str(tmp_path)!r} + "/" + name, "glossy-sphere", lights=3, cameras=cameras,
+        points=6000, overwrite=overwrite))
+""",
+        limit=20_000,
+    )
+    for name in ("new.zarr", "kept.zarr"):
+        assert found[name]["project"], found[name]["traceback"]
+        assert found[name]["message"].startswith(f"{tmp_path / name}: cannot write: the file is")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.zarr"]  # no partial store
+    after = sorted((p.relative_to(kept), p.read_bytes()) for p in kept.rglob("*") if p.is_file())
+    assert after == before
