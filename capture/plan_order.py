@@ -10,9 +10,9 @@ Two orderings build a :class:`Schedule` (the stops the rig makes, in order):
   descending at the next camera, and so on.
 - ``optimised``: the cameras toured by camera-move time, and at each camera the lights toured by
   light-move time starting from where the light stands; each tour is the better of a
-  nearest-neighbour tour and the index order, each improved by 2-opt. The serpentine schedule
-  replaces it when that one leaves out fewer stops, or as many with no more motion, so the
-  optimised ordering is never slower than the baseline.
+  nearest-neighbour tour and the index order, each improved by 2-opt (:mod:`capture.tours`).
+  The serpentine schedule replaces it when that one leaves out fewer stops, or as many with no
+  more motion, so the optimised ordering is never slower than the baseline.
 
 Either way a light stop whose straight move from the previous stop is unsafe
 (:func:`rig.safety.path_violation`) is put off, then inserted at the cheapest place of its
@@ -25,7 +25,6 @@ light where it stands, or at park.
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -33,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from capture.tours import open_tour
 from core.progress import progress_bar
 from rig.config import RigConfig
 from rig.motion_time import move_seconds, move_seconds_matrix, path_seconds, pose_row
@@ -55,8 +55,6 @@ ORDERINGS = ("optimised", "serpentine")
 #: Time per image besides motion and exposure (trigger, readout and transfer, SHA-256, atomic
 #: write, journal fsync), seconds; the estimate adds ``light.settle_s`` per light switch.
 IMAGE_OVERHEAD_S = 0.5
-#: 2-opt stops after this many passes over a tour (it usually converges in a handful).
-_MAX_PASSES = 50
 
 Angles = tuple[float, float]
 FloatArray = NDArray[np.float64]
@@ -175,70 +173,13 @@ def _pose(camera: Angles, light: Angles) -> RigPose:
     return RigPose(camera[0], camera[1], light[0], light[1])
 
 
-def _tour_cost(cost: FloatArray, path: Sequence[int]) -> float:
-    return float(sum(cost[a, b] for a, b in itertools.pairwise(path)))
-
-
-def _two_opt(cost: FloatArray, path: list[int]) -> list[int]:
-    """Improve an open path whose first node stays put by reversing segments (2-opt)."""
-    p = np.array(path)
-    n = len(p)
-    for _ in range(_MAX_PASSES):
-        improved = False
-        for i in range(1, n - 1):
-            j = np.arange(i + 1, n)
-            last = j == n - 1
-            after = p[np.minimum(j + 1, n - 1)]
-            a, b, c = p[i - 1], p[i], p[j]
-            delta = cost[a, c] - cost[a, b] + np.where(last, 0.0, cost[b, after] - cost[c, after])
-            best = int(np.argmin(delta))
-            if delta[best] < -1e-9:
-                p[i : j[best] + 1] = p[i : j[best] + 1][::-1].copy()
-                improved = True
-        if not improved:
-            break
-    return [int(v) for v in p]
-
-
-def _nearest_neighbour(cost: FloatArray) -> list[int]:
-    n = cost.shape[0]
-    path = [0]
-    free = np.ones(n, dtype=bool)
-    free[0] = False
-    for _ in range(n - 1):
-        row = np.where(free, cost[path[-1]], np.inf)
-        nxt = int(np.argmin(row))
-        path.append(nxt)
-        free[nxt] = False
-    return path
-
-
-def _open_tour(cost: FloatArray) -> list[int]:
-    """A short open path from node 0 through every node of ``cost``; the nodes after 0.
-
-    The better of nearest neighbour and the given order (1, 2, ...; or reversed), each improved
-    by 2-opt.
-    """
-    n = cost.shape[0]
-    if n <= 2:
-        return list(range(1, n))
-    candidates = [
-        _nearest_neighbour(cost),
-        list(range(n)),
-        [0, *range(n - 1, 0, -1)],
-    ]
-    tours = [_two_opt(cost, c) for c in candidates]
-    best = min(tours, key=lambda t: _tour_cost(cost, t))
-    return best[1:]
-
-
 def _light_tour(
     config: RigConfig, camera: Angles, lights: Sequence[Angles], start: RigPose
 ) -> list[int]:
     """Positions into ``lights`` in a short tour from the light pose of ``start``."""
     nodes = [(start.light_azimuth_deg, start.light_inclination_deg), *lights]
     rows = np.array([[camera[0], camera[1], az, incl, 0.0] for az, incl in nodes])
-    order = _open_tour(move_seconds_matrix(config, rows, rows))
+    order = open_tour(move_seconds_matrix(config, rows, rows))
     return [k - 1 for k in order]
 
 
@@ -246,7 +187,7 @@ def _camera_tour(config: RigConfig, cameras: Sequence[Angles], start: RigPose) -
     """Camera indices in a short tour (camera moves only) from the camera pose of ``start``."""
     nodes = [(start.camera_azimuth_deg, start.camera_inclination_deg), *cameras]
     rows = np.array([[az, incl, 0.0, 0.0, 0.0] for az, incl in nodes])
-    order = _open_tour(move_seconds_matrix(config, rows, rows))
+    order = open_tour(move_seconds_matrix(config, rows, rows))
     return [k - 1 for k in order]
 
 
