@@ -38,7 +38,8 @@ from processing.sample_models import (
     SampleModels,
     fit_sample_models,
 )
-from processing.sample_models.fitting import FitLayout, fit_blocks
+from processing.sample_models.fitting import fit_blocks
+from processing.sample_models.layout import FitLayout
 
 __all__ = [
     "FORMAT_VERSION",

@@ -87,6 +87,7 @@ Package layout (each module imports only those above it)
 ``bases``       the linear bases and their hat-matrix fit
 ``stereo``      photometric stereo, a pixel field's starting normals (``PS_DARK``, ``PS_BRIGHT``)
 ``fit_kernel``  the numba kernel of the parametric fits (``LOBE_PEAK``, ``MIN_LOBE_SUPPORT``)
+``layout``      the per-sample arrays of a fit, block by block (:class:`~.layout.FitLayout`)
 ``fitting``     :func:`fit_sample_models` (``ALPHA_RANGE``, ``SHADOW_RATIO``,
                 ``SHADOW_ITERATIONS``, :func:`sample_block_size`)
 ``shadows``     the geometric shadow marks

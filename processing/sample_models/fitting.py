@@ -5,12 +5,13 @@ as Dask tasks (one per block), fits the linear bases, finds the starting normals
 parametric kernel: each block is read from the store once and fitted whole, by every model.
 :func:`fit_sample_models` gathers the blocks into a :class:`SampleModels` held in memory;
 :func:`processing.sample_model_store.fit_to_file` writes them to the fit file as they come, for
-fields whose fits do not fit in memory (a 24-megapixel capture's five models are 13 GB).
+fields whose fits do not fit in memory (a 24-megapixel capture's five models are 13 GB). The
+per-sample arrays a fit fills are named by :class:`processing.sample_models.layout.FitLayout`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,21 +29,17 @@ from processing.sample_models.fits import (
     BASIS_MODELS,
     MODELS,
     PARAMETRIC_MODELS,
-    BasisFit,
-    Fit,
     ModelName,
-    ParametricFit,
     ParametricModelName,
     SampleModels,
 )
-from processing.sample_models.loo import LooError, leave_one_out_weights
+from processing.sample_models.layout import BlockFits, FitLayout
+from processing.sample_models.loo import leave_one_out_weights
 from processing.sample_models.stereo import check_stereo_lights, photometric_stereo
 
 __all__ = [
     "ALPHA_RANGE",
     "FIT_BLOCK_BYTES",
-    "BlockFits",
-    "FitLayout",
     "budget_for",
     "fit_blocks",
     "fit_sample_models",
@@ -135,90 +132,6 @@ def fit_sample_models(
         for key, values in fitted.items():
             arrays[key][part] = values
     return layout.models(arrays)
-
-
-@dataclass(frozen=True, eq=False)
-class FitLayout:
-    """A field's fit but for its per-sample arrays: what :func:`fit_blocks` fills block by block.
-
-    Attributes
-    ----------
-    kind, light_directions, camera_frame, view_direction, points, sample_count : as
-        :class:`SampleModels` has them
-    names : tuple of str, the models, in fitting order
-    basis_terms : dict of str to int, the terms B of each basis model
-    normals_fitted : bool, the parametric fits' normals were fitted (photometric stereo,
-        refinement) rather than stored
-    """
-
-    kind: str
-    light_directions: NDArray[np.float64]
-    camera_frame: NDArray[np.float64]
-    view_direction: NDArray[np.float64] | None
-    points: NDArray[np.float64] | None
-    sample_count: int
-    names: tuple[ModelName, ...]
-    basis_terms: dict[str, int]
-    normals_fitted: bool
-
-    def arrays(self) -> dict[str, tuple[np.dtype[Any], tuple[int, ...]]]:
-        """Every per-sample array, ``MODEL__ARRAY``: its dtype and its shape after the sample.
-
-        Parametric: ``normals`` (3,) float64, ``rho_d`` and ``f0`` (3,) float32, ``alpha``
-        () float32, ``lit`` (T,) uint8, ``fitted`` () bool; basis: ``coefficients`` (B, 3)
-        float32; both: ``loo_squared_error`` and ``loo_energy`` () float64. The names are
-        those of the saved fit (:mod:`processing.sample_model_store`).
-        """
-        t_count = len(self.light_directions)
-        out: dict[str, tuple[np.dtype[Any], tuple[int, ...]]] = {}
-        for name in self.names:
-            if name in BASIS_MODELS:
-                out[f"{name}__coefficients"] = (np.dtype(np.float32), (self.basis_terms[name], 3))
-            else:
-                out |= {
-                    f"{name}__normals": (np.dtype(np.float64), (3,)),
-                    f"{name}__rho_d": (np.dtype(np.float32), (3,)),
-                    f"{name}__f0": (np.dtype(np.float32), (3,)),
-                    f"{name}__alpha": (np.dtype(np.float32), ()),
-                    f"{name}__lit": (np.dtype(np.uint8), (t_count,)),
-                    f"{name}__fitted": (np.dtype(np.bool_), ()),
-                }
-            out[f"{name}__loo_squared_error"] = (np.dtype(np.float64), ())
-            out[f"{name}__loo_energy"] = (np.dtype(np.float64), ())
-        return out
-
-    def models(self, arrays: Mapping[str, NDArray[Any]]) -> SampleModels:
-        """The :class:`SampleModels` of the arrays :meth:`arrays` names, filled."""
-        fits: dict[str, Fit] = {}
-        for name in self.names:
-            loo = LooError(arrays[f"{name}__loo_squared_error"], arrays[f"{name}__loo_energy"])
-            if name in BASIS_MODELS:
-                fits[name] = BasisFit(name, arrays[f"{name}__coefficients"], loo)
-                continue
-            fits[name] = ParametricFit(
-                name=name,
-                normals=arrays[f"{name}__normals"],
-                rho_d=arrays[f"{name}__rho_d"],
-                f0=arrays[f"{name}__f0"],
-                alpha=arrays[f"{name}__alpha"],
-                lit=arrays[f"{name}__lit"],
-                fitted=arrays[f"{name}__fitted"],
-                loo=loo,
-                normals_fitted=self.normals_fitted,
-            )
-        return SampleModels(
-            kind=self.kind,
-            light_directions=self.light_directions,
-            camera_frame=self.camera_frame,
-            view_direction=self.view_direction,
-            points=self.points,
-            fits=fits,
-            sample_count=self.sample_count,
-        )
-
-
-#: One block's fitted arrays, by :meth:`FitLayout.arrays` name, rows the block's samples.
-BlockFits = dict[str, NDArray[Any]]
 
 
 def fit_blocks(
