@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from core.atomic import atomic_path, output_problem
+from core.atomic import atomic_path, output_problem, write_problem
 from core.errors import DatasetError, InputError
 from core.field_store import ReflectanceField, companion_paths
 from processing.sample_models import (
@@ -203,6 +203,8 @@ def fit_to_file(
                 # Its part is in the archive: the disk holds the fit twice only per array.
                 handles.pop(key).close()
                 files[key].unlink()
+    except OSError as error:  # a full disk while writing the parts (the archive's is named)
+        raise InputError(write_problem(target, error)) from None
     finally:
         for handle in handles.values():
             handle.close()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -20,9 +21,11 @@ from processing.sample_model_store import read_sample_models
 from processing.sample_models import BasisFit, SampleModels, fit_sample_models, sample_block_size
 from sim.field import field_cameras, simulate_field
 from tests.cluster_faults import kill_a_worker_mid_run
+from tests.full_disk import run_limited
 
 CHUNK = 700  # samples per stored chunk: 3000 samples are 4 full chunks and a short one
 BYTES_PER_SAMPLE = 6 * 16 * 3 * 4  # float32 radiance of one sample, 6 cameras x 16 lights
+RIG = str(Path(sys.executable).with_name("rig"))
 
 
 @pytest.fixture(scope="module")
@@ -126,6 +129,19 @@ def test_rig_fit_refuses_a_budget_below_one_sample(
     assert main(argv) == 2
     assert "cannot hold one sample's radiance" in capsys.readouterr().err
     assert not (tmp_path / "f.npz").exists()
+
+
+def test_rig_fit_on_a_full_disk_keeps_the_old_fit_and_no_parts(store: Path, tmp_path: Path) -> None:
+    # Its part files ended in an OSError traceback on a full disk (a real file size limit,
+    # in a child: tests/full_disk.py); the fit already there stays.
+    target = tmp_path / "fit.npz"
+    target.write_bytes(b"the previous fit")
+    done = run_limited([RIG, "fit", str(store), "-o", str(target), "--quiet"], limit=20_000)
+    assert done.returncode == 2, done.stderr
+    assert f"rig fit: error: {target}: cannot write: the file is larger" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert target.read_bytes() == b"the previous fit"
+    assert [p.name for p in tmp_path.iterdir()] == ["fit.npz"]
 
 
 # --- on a Dask cluster ---------------------------------------------------------------------
