@@ -10,6 +10,10 @@ out a ready-to-use file. The keys, units and defaults are documented in ``docs/r
 Axis conversion (both devices): ``device = direction * scale * (rig_deg - offset_deg)``, with
 ``scale = gear_ratio`` (servo degrees per rig degree) for a Dynamixel axis and
 ``scale = units_per_deg`` (GRBL machine units per rig degree) for a GRBL axis.
+
+The parts have modules of their own, their names importable from here: the serial devices,
+axes and light (:mod:`rig.config_devices`), the cameras (:mod:`rig.config_cameras`), the
+checked TOML tables (:mod:`rig.config_schema`) and the safety rules (:mod:`rig.safety`).
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from core.errors import ConfigError, InputError
 from core.field_store import BELOW_HORIZON, BelowHorizon
@@ -32,6 +36,17 @@ from rig.config_cameras import (
     camera_to_dict,
     parse_camera,
 )
+from rig.config_devices import (
+    XM430_W350,
+    AxisConfig,
+    GantryConfig,
+    LightConfig,
+    ServoChainConfig,
+    _axis_to_dict,
+    _check,
+    _light_to_dict,
+    _parse_axis,
+)
 from rig.config_schema import Table, dump_toml, read_toml
 from rig.pose import REQUIRED_ROLES, ROLES, RigPose
 from rig.safety import ForbiddenZone, SafetyConfig, parse_safety, pose_violation, safety_to_dict
@@ -39,6 +54,7 @@ from rig.safety import ForbiddenZone, SafetyConfig, parse_safety, pose_violation
 __all__ = [
     "IN_PROCESS_PORT",
     "SCHEMA_VERSION",
+    "XM430_W350",
     "AxisConfig",
     "CameraConfig",
     "CameraFaultConfig",
@@ -61,171 +77,6 @@ SCHEMA_VERSION = 1
 #: The serial port of a simulated rig's devices in a config that ``rig capture --sim`` (or any
 #: caller of :class:`sim.simulated_rig.SimulatedRig`) starts in its own process: no device.
 IN_PROCESS_PORT = "/dev/null"
-#: Dynamixel model number of the XM430-W350 (the control table of issue 5).
-XM430_W350 = 1020
-_SERVO_KEYS = ("servo_id", "gear_ratio", "velocity_deg_s")
-_GRBL_KEYS = ("grbl_axis", "units_per_deg", "feed_deg_min")
-
-
-@dataclass(frozen=True)
-class ServoChainConfig:
-    """The Dynamixel chain's serial port (``[servos]``)."""
-
-    port: str
-    baudrate: int = 57_600
-    model_number: int = XM430_W350
-
-    def __post_init__(self) -> None:
-        _check(bool(self.port), "servos.port", self.port, "must name a serial device")
-        _check(self.baudrate > 0, "servos.baudrate", self.baudrate, "must be positive")
-
-
-@dataclass(frozen=True)
-class GantryConfig:
-    """The GRBL controller's serial port (``[gantry]``) and its operator choices."""
-
-    port: str
-    baudrate: int = 115_200
-    homing: bool = False  # run $H on connect (the controller must have $22=1)
-    unlock_on_alarm: bool = False  # send $X after an alarm without asking the operator
-
-    def __post_init__(self) -> None:
-        _check(bool(self.port), "gantry.port", self.port, "must name a serial device")
-        _check(self.baudrate > 0, "gantry.baudrate", self.baudrate, "must be positive")
-
-
-@dataclass(frozen=True)
-class AxisConfig:
-    """One axis (``[axes.<role>]``): which device drives it, conversion, limits and speed.
-
-    ``servo_id``, ``gear_ratio`` and ``velocity_deg_s`` apply to Dynamixel axes; ``grbl_axis``,
-    ``units_per_deg`` and ``feed_deg_min`` to GRBL axes.
-    """
-
-    role: str
-    device: Literal["dynamixel", "grbl"]
-    min_deg: float
-    max_deg: float
-    servo_id: int | None = None
-    grbl_axis: str | None = None
-    offset_deg: float = 0.0
-    direction: int = 1
-    gear_ratio: float = 1.0
-    units_per_deg: float = 1.0
-    velocity_deg_s: float = 30.0
-    acceleration_deg_s2: float = 60.0
-    feed_deg_min: float = 1800.0
-
-    def __post_init__(self) -> None:
-        key = f"axes.{self.role}"
-        if self.role not in ROLES:
-            raise ConfigError(f"unknown axis role {key}; roles are {', '.join(ROLES)}")
-        _check(
-            self.device in ("dynamixel", "grbl"),
-            f"{key}.device",
-            self.device,
-            "is not 'dynamixel' or 'grbl'",
-        )
-        _check(
-            self.min_deg < self.max_deg,
-            f"{key}.min_deg",
-            self.min_deg,
-            f"is not below max_deg = {self.max_deg!r}",
-        )
-        _check(self.direction in (1, -1), f"{key}.direction", self.direction, "must be 1 or -1")
-        _check(
-            self.acceleration_deg_s2 > 0,
-            f"{key}.acceleration_deg_s2",
-            self.acceleration_deg_s2,
-            "must be positive",
-        )
-        if self.device == "dynamixel":
-            _check(
-                self.servo_id is not None,
-                f"{key}.servo_id",
-                None,
-                "is required for a dynamixel axis",
-            )
-            # 253 is reserved and 254 is the broadcast id in Protocol 2.0.
-            _check(
-                0 <= (self.servo_id or 0) <= 252,
-                f"{key}.servo_id",
-                self.servo_id,
-                "must be in 0..252",
-            )
-            _check(
-                self.grbl_axis is None,
-                f"{key}.grbl_axis",
-                self.grbl_axis,
-                "does not apply to a dynamixel axis",
-            )
-            _check(self.gear_ratio > 0, f"{key}.gear_ratio", self.gear_ratio, "must be positive")
-            _check(
-                self.velocity_deg_s > 0,
-                f"{key}.velocity_deg_s",
-                self.velocity_deg_s,
-                "must be positive",
-            )
-        else:
-            _check(
-                self.grbl_axis in ("X", "Y", "Z"),
-                f"{key}.grbl_axis",
-                self.grbl_axis,
-                "must be 'X', 'Y' or 'Z'",
-            )
-            _check(
-                self.servo_id is None,
-                f"{key}.servo_id",
-                self.servo_id,
-                "does not apply to a grbl axis",
-            )
-            _check(
-                self.units_per_deg > 0,
-                f"{key}.units_per_deg",
-                self.units_per_deg,
-                "must be positive (use direction = -1 to reverse)",
-            )
-            _check(
-                self.feed_deg_min > 0, f"{key}.feed_deg_min", self.feed_deg_min, "must be positive"
-            )
-
-    @property
-    def scale(self) -> float:
-        """Device units (servo degrees or GRBL machine units) per rig degree, signed."""
-        return self.direction * (
-            self.gear_ratio if self.device == "dynamixel" else self.units_per_deg
-        )
-
-    def to_device(self, rig_deg: float) -> float:
-        """Rig degrees to the device's position (servo degrees or GRBL machine units)."""
-        return self.scale * (rig_deg - self.offset_deg)
-
-    def from_device(self, device_position: float) -> float:
-        """The device's position back to rig degrees."""
-        return device_position / self.scale + self.offset_deg
-
-    def within_limits(self, rig_deg: float) -> bool:
-        """Whether ``rig_deg`` lies within ``[min_deg, max_deg]``, ends included."""
-        return self.min_deg <= rig_deg <= self.max_deg
-
-
-@dataclass(frozen=True)
-class LightConfig:
-    """How GRBL switches the light (``[light]``): spindle PWM (M3 S / M5) or coolant (M8 / M9)."""
-
-    control: Literal["spindle", "coolant"] = "spindle"
-    max_s: float = 1000.0  # spindle: the S word of full intensity (GRBL $30)
-    settle_s: float = 0.0  # wait after switching before an image is taken
-
-    def __post_init__(self) -> None:
-        _check(
-            self.control in ("spindle", "coolant"),
-            "light.control",
-            self.control,
-            "is not 'spindle' or 'coolant'",
-        )
-        _check(self.max_s > 0, "light.max_s", self.max_s, "must be positive")
-        _check(self.settle_s >= 0, "light.settle_s", self.settle_s, "must be >= 0")
 
 
 @dataclass(frozen=True)
@@ -330,11 +181,6 @@ class RigConfig:
         return header + dump_toml(self.to_dict())
 
 
-def _check(ok: bool, key: str, value: object, problem: str) -> None:
-    if not ok:
-        raise ConfigError(f"{key} = {value!r} {problem}")
-
-
 def _unique(axes: Mapping[str, AxisConfig], attribute: str, what: str) -> None:
     seen: dict[object, str] = {}
     for role, axis in axes.items():
@@ -347,43 +193,6 @@ def _unique(axes: Mapping[str, AxisConfig], attribute: str, what: str) -> None:
                 f"axes.{role}.{attribute}"
             )
         seen[value] = role
-
-
-def _axis_to_dict(axis: AxisConfig) -> dict[str, Any]:
-    skip = {"role", *(_GRBL_KEYS if axis.device == "dynamixel" else _SERVO_KEYS)}
-    return {f.name: getattr(axis, f.name) for f in fields(axis) if f.name not in skip}
-
-
-def _light_to_dict(light: LightConfig) -> dict[str, Any]:
-    document: dict[str, Any] = {"control": light.control, "settle_s": light.settle_s}
-    if light.control == "spindle":
-        document["max_s"] = light.max_s
-    return document
-
-
-def _parse_axis(table: Table, role: str) -> AxisConfig:
-    device = table.string("device", choices=("dynamixel", "grbl"))
-    foreign = _GRBL_KEYS if device == "dynamixel" else _SERVO_KEYS
-    for name in foreign:
-        if table.has(name):
-            raise ConfigError(f"{table.key(name)} does not apply to a {device} axis")
-    values: dict[str, Any] = {
-        "min_deg": table.number("min_deg"),
-        "max_deg": table.number("max_deg"),
-        "offset_deg": table.number("offset_deg", 0.0),
-        "direction": table.integer("direction", 1),
-        "acceleration_deg_s2": table.number("acceleration_deg_s2", 60.0),
-    }
-    if device == "dynamixel":
-        values["servo_id"] = table.integer("servo_id")
-        values["gear_ratio"] = table.number("gear_ratio", 1.0)
-        values["velocity_deg_s"] = table.number("velocity_deg_s", 30.0)
-    else:
-        values["grbl_axis"] = table.string("grbl_axis", choices=("X", "Y", "Z"))
-        values["units_per_deg"] = table.number("units_per_deg", 1.0)
-        values["feed_deg_min"] = table.number("feed_deg_min", 1800.0)
-    table.finish()
-    return AxisConfig(role=role, device=device, **values)
 
 
 def _parse_port(table: Table, cls: type[Any], baudrate: int, **extra: Any) -> Any:
