@@ -1,4 +1,6 @@
-"""Point splatting kernels: a z-buffer of disks, and depth-tested blending (numba).
+"""Over 500 lines because it is one numba kernel family over one disk loop and its row bands.
+
+Point splatting kernels: a z-buffer of disks, and depth-tested blending (numba).
 
 Shared by the simulator's camera and the renderer (``render.splat``), so both live beside the
 camera model they project with.

@@ -1,4 +1,6 @@
-"""Numeric tables for two published variable-coefficient error-diffusion halftoners.
+"""Over 500 lines because it is the numeric tables of two published halftoners, kept whole.
+
+Numeric tables for two published variable-coefficient error-diffusion halftoners.
 
 Data only (numbers extracted from public reference programs); no code was copied.
 

@@ -1,4 +1,6 @@
-"""GRBL 1.1 light gantry driver on ``pyserial``: light azimuth and inclination as two GRBL axes.
+"""Over 500 lines because one driver class keeps the pinned modes and safety rules below.
+
+GRBL 1.1 light gantry driver on ``pyserial``: light azimuth and inclination as two GRBL axes.
 
 Degrees in, G-code only inside this module and :mod:`rig.grbl_link` (the serial link: one line
 at a time, never re-sent, alarms and resets). See ``docs/grbl.md``.

@@ -1,12 +1,14 @@
-"""The numba kernel of the parametric fits, parallel over samples.
+"""Over 500 lines because numba's cache sees only this file's edits: the kernels stay together.
+
+The numba kernel of the parametric fits, parallel over samples.
 
 Every sample's lambert / lambert+ggx fit, shadow marks, normal refinement and
 leave-one-light-out error.
 
-This module is longer than the others on purpose: numba's ``cache=True`` invalidates a cached
-kernel only when its own source file changes, not when a jitted function or a global constant
-it calls from another file does. Keeping every kernel and the constants they compile in here
-means an edit to any of them recompiles the whole kernel instead of running a stale cache.
+Why: numba's ``cache=True`` invalidates a cached kernel only when its own source file changes,
+not when a jitted function or a global constant it calls from another file does. Keeping every
+kernel and the constants they compile in here means an edit to any of them recompiles the whole
+kernel instead of running a stale cache.
 (``core.brdf.specular_lobe`` is the one jitted callee outside this file.)
 """
 
