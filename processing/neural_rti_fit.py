@@ -71,7 +71,7 @@ class NeuralSettings:
         stepped only when its pixel is drawn, so it is given larger steps
     encoder_rate : float, initial learning rate of the encoder (the same decay)
     holdout : float, share of the lights held out (0 to 0.5; spread over the dome,
-        :func:`processing.learned_rti.validation_lights`)
+        :func:`processing.network_training.validation_lights`)
     encoder : bool, codes made by an encoder network from the pixel's 8-bit values (to code
         pixels not trained on) instead of optimised per pixel
     encoder_width : int, hidden units of each of the encoder's three layers

@@ -2,7 +2,7 @@
 
 The linear schemes (:mod:`render.relighter`) weight the measured images; the model engine
 (:mod:`render.model_relight`) shades fitted BRDFs. This engine relights through any
-:class:`render.light_prediction.LightPredictor` (the learned rung, a model plus its residual,
+:class:`render.prediction_methods.LightPredictor` (the learned rung, a model plus its residual,
 the adaptive mixture, PTM/HSH): the panorama is summed exactly into grid blocks, one light at
 each block's energy-weighted centroid (:func:`core.light_set.grid_lights`), and the field's
 radiance under the environment is

@@ -1,6 +1,6 @@
 """The 8-bit sRGB values the RTI tools fit, by table: :func:`eight_bit_levels`, exactly, faster.
 
-:func:`render.light_prediction.eight_bit_levels` (scale, clip to 0..1, sRGB-encode, round)
+:func:`render.rti_fits.eight_bit_levels` (scale, clip to 0..1, sRGB-encode, round)
 defines the values. It raises every value to the power 1/2.4, which on a 24-megapixel view of
 60 lights is minutes; the export reads the view once or twice. So the levels are taken from
 the float's bits instead: a float32 in 0..1 is, by its top 20 bits, in one of 2^18 buckets of
