@@ -121,12 +121,17 @@ class LightView:
         return path
 
 
+#: Largest captured image sent whole (pixels): the page's canvas is at most 960 x 640, and
+#: a larger picture costs seconds to read, encode and send before the first frame.
+CAPTURED_PIXELS = 1_000_000
+
+
 class CapturedLight:
     """The captured image nearest a light: what the page shows before the fits are written.
 
     Measured data, no fit: the page can move the light from its first second (among the
     captured lights, as a capture's own browser does) while the server writes the HSH and PTM
-    planes. An image over :data:`SERVER_PIXELS` is sent every k-th pixel in both directions.
+    planes. An image over :data:`CAPTURED_PIXELS` is sent every k-th pixel in both directions.
 
     Parameters
     ----------
@@ -140,7 +145,7 @@ class CapturedLight:
         #: The measured lights in the camera's frame (T, 3): x right, y up, z to the camera.
         self.directions = rig_to_camera(field.light_directions, field.cameras[0])
         height, width = field.image_shape or (0, 0)
-        self.step = max(1, math.ceil(math.sqrt(width * height / SERVER_PIXELS)))
+        self.step = max(1, math.ceil(math.sqrt(width * height / CAPTURED_PIXELS)))
         #: The pictures' (width, height).
         self.size = (-(-width // self.step), -(-height // self.step))
         self._scale: float | None = None
@@ -175,8 +180,8 @@ class CapturedLight:
         from render.field_view import FieldView
 
         index = self.nearest(light)
-        image = FieldView.captured(self.field, 0).image(self.field.light_radiance(0, index))
-        shown = image[:: self.step, :: self.step]
+        values = self.field.light_radiance(0, index, widen=False)
+        shown = FieldView.captured(self.field, 0).image(values, step=self.step)
         _, png = encode_picture(clipped_srgb_8bit(shown, self._display_scale()), ".png")
         return png, index
 

@@ -589,22 +589,26 @@ class ReflectanceField:
             )
         return values
 
-    def light_radiance(self, camera: int, light: int) -> NDArray[np.float32]:
-        """Radiance (P, 3), float32, of every sample under one light seen by ``camera``.
+    def light_radiance(
+        self, camera: int, light: int, *, widen: bool = True
+    ) -> NDArray[np.floating]:
+        """Radiance (P, 3) of every sample under one light seen by ``camera``.
 
         One captured image of a field of pixels: a read of that light's chunks only, uncached,
-        checked as :meth:`camera_radiance` checks.
+        checked for NaN and infinity. ``widen``: float32 (default), else the storage dtype
+        (a float16 store's widening costs more than its read: a caller that keeps part of the
+        image widens only that).
         """
         s, t, _ = self.shape
         if not (0 <= camera < s and 0 <= light < t):
             raise InputError(f"camera {camera}, light {light} outside the {s} x {t} of {self.path}")
         values = read_checked(self.path, self.radiance, (camera, light))
-        if not np.isfinite(values).all():
+        if not _all_finite(values):
             raise DatasetError(
                 f"{self.path}: non-finite radiance (NaN or infinity) seen by camera {camera} "
                 f"under light {light}: rebuild the store from its source"
             )
-        return np.asarray(values, dtype=np.float32)
+        return np.asarray(values, dtype=np.float32) if widen else values
 
     @property
     def sample_chunk(self) -> int:
@@ -789,3 +793,17 @@ class ReflectanceField:
             radiance=radiance,
             cached_slabs=len(keep_s),
         )
+
+
+def _all_finite(values: NDArray[np.floating]) -> bool:
+    """Whether no value is NaN or infinite (float16 by its exponent bits: numpy's test is slow)."""
+    flat = values.reshape(-1)
+    step = 1 << 20  # blocks that stay in cache: a whole image's temporaries cost seconds
+    for start in range(0, len(flat), step):
+        block = flat[start : start + step]
+        if block.dtype == np.float16:
+            if np.any((block.view(np.uint16) & 0x7C00) == 0x7C00):
+                return False
+        elif not np.isfinite(block).all():
+            return False
+    return True

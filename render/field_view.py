@@ -78,13 +78,18 @@ class FieldView:
         """The view of captured camera ``index``."""
         return cls(field, field.cameras[index], spacing=spacing, index=index)
 
-    def image(self, values: NDArray[np.floating]) -> NDArray[np.float32]:
+    def image(self, values: NDArray[np.floating], *, step: int = 1) -> NDArray[np.float32]:
         """The image of per-sample ``values`` (P, 3): (H, W, 3) float32.
 
         A field of pixels' image is its values in place (a mask's other pixels as given:
-        the engines leave them 0); a field of points' is the values splatted.
+        the engines leave them 0); ``step`` > 1 keeps every step-th pixel in each direction
+        (a preview; widened to float32 after the cut). A field of points' is the values
+        splatted (``step`` 1 only).
         """
         if self.plan is None:
             assert self._shape is not None
-            return np.asarray(values, dtype=np.float32).reshape(*self._shape, 3)
+            pixels = np.asarray(values).reshape(*self._shape, 3)[::step, ::step]
+            return np.ascontiguousarray(pixels, dtype=np.float32)
+        if step != 1:
+            raise InputError("a field of points' image is splatted whole (step 1)")
         return splat(self.plan, values)

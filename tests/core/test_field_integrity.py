@@ -102,6 +102,10 @@ def test_nan_radiance_is_refused_with_count_and_location(
         field.camera_slab(1)
     with pytest.raises(DatasetError, match="non-finite"):
         field.load()
+    # One light's image (the viewer's captured pictures) is checked too, in both widths.
+    with pytest.raises(DatasetError, match=r"non-finite radiance .* camera 1 under light 3"):
+        field.light_radiance(1, 3, widen=False)
+    assert np.isfinite(field.light_radiance(1, 2)).all()
     assert main(["verify", str(store), "--quiet"]) == 1
     out = capsys.readouterr().out
     assert "3 non-finite radiance values in camera 1 light 3, the first at sample 5" in out
@@ -146,3 +150,26 @@ def test_the_writer_refuses_non_finite_values_and_keeps_black_slabs(tmp_path: Pa
     field = ReflectanceField.open(path)
     np.testing.assert_array_equal(field.camera_slab(0)[0], 0.0)
     assert check_store(path).ok
+
+
+@pytest.mark.parametrize("dtype", ["float16", "float32"])
+def test_one_light_of_either_width_is_checked_for_nan(tmp_path: Path, dtype: str) -> None:
+    camera = PinholeCamera(azimuth_deg=0.0, inclination_deg=30.0, width=8, height=8)
+    writer = FieldStoreWriter(tmp_path / "f.zarr", points=np.zeros((6, 3)),
+                              normals=np.tile([0.0, 0.0, 1.0], (6, 1)),
+                              light_directions=np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]),
+                              cameras=[camera], dtype=dtype)  # fmt: skip
+    writer.write_slab(0, 0, np.full((6, 3), 65504.0))  # float16's largest: finite
+    writer.write_slab(0, 1, np.ones((6, 3)))
+    writer.write_visibility(0, np.ones(6, dtype=bool))
+    path = writer.finish()
+    field = ReflectanceField.open(path)
+    assert field.light_radiance(0, 0, widen=False).dtype == np.dtype(dtype)
+    assert field.light_radiance(0, 0).max() == 65504.0
+    for bad in (np.nan, np.inf, -np.inf):
+        radiance = zarr.open_group(str(path), mode="r+")["radiance"]
+        slab = np.ones((6, 3), dtype=dtype)
+        slab[5, 2] = bad
+        radiance[0, 1] = slab
+        with pytest.raises(DatasetError, match="camera 0 under light 1"):
+            ReflectanceField.open(path).light_radiance(0, 1)
