@@ -1,4 +1,6 @@
-"""The reflectance-field store on disk: a Zarr group (schema version 1).
+"""Over 500 lines because schema, writer and reader stay together so they cannot drift apart.
+
+The reflectance-field store on disk: a Zarr group (schema version 1).
 
 Written by the simulator (``rig sim field``) and by processing (from captures) through
 :class:`FieldStoreWriter`, read by everything downstream through :class:`ReflectanceField`:
