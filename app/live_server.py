@@ -1,4 +1,6 @@
-"""The browser viewer's server: a page, and frames over a WebSocket (``rig view``).
+"""Over 500 lines because the routes, the viewer state they share and the server are one app.
+
+The browser viewer's server: a page, and frames over a WebSocket (``rig view``).
 
 The server is aiohttp: one well-kept library for the static page, the small JSON routes,
 uploads and the WebSocket the frames stream over, on asyncio, with no framework or build step
