@@ -1,4 +1,6 @@
-"""Relighting through per-sample models: any lighting, any view, no interpolation of values.
+"""Over 500 lines because model lighting, its numba kernel and the engine are one relight path.
+
+Relighting through per-sample models: any lighting, any view, no interpolation of values.
 
 The models of :mod:`processing.sample_models` are evaluated against an environment's lights:
 
