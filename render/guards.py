@@ -1,4 +1,6 @@
-"""Plain-language warnings for the cases where relighting is known to go wrong.
+"""Over 500 lines because each guard keeps its own thresholds and plain-language advice.
+
+Plain-language warnings for the cases where relighting is known to go wrong.
 
 Each guard looks at the inputs only (the field's light and camera layout, its fitted lobes, the
 view, the panorama) and says what to expect and what fixes it. Where the fix might be to relight
