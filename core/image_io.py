@@ -1,4 +1,6 @@
-"""Image files: the one module that reads and writes EXR, Radiance HDR, PNG, JPEG, TIFF and TGA.
+"""Over 500 lines because it is the one module reading and writing every image format.
+
+Image files: the one module that reads and writes EXR, Radiance HDR, PNG, JPEG, TIFF and TGA.
 
 Readers return the stored values (:func:`read_pixels`: uint8, uint16 or float32, RGB channel
 order, alpha dropped, grey kept as (H, W)) or linear float32 (:func:`read_linear`: integers
