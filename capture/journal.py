@@ -1,4 +1,6 @@
-"""The capture journal: ``journal.jsonl``, append-only run documents in the bluesky manner.
+"""Over 500 lines because the documents, their reader and the writer stay together, in step.
+
+The capture journal: ``journal.jsonl``, append-only run documents in the bluesky manner.
 
 Each line is one JSON object, a *document*:
 
