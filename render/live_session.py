@@ -1,4 +1,6 @@
-"""A live relighting session: the viewer's state, and one frame per change of its controls.
+"""Over 500 lines because one session holds the viewer's state and redoes only what changed.
+
+A live relighting session: the viewer's state, and one frame per change of its controls.
 
 The browser viewer (``rig view``) is a page over this class. The session holds the field, the
 two modes a person switches between (the paper's configuration and the mode chosen for the
