@@ -171,13 +171,26 @@ def finite_number(value: object, name: str) -> float:
     return float(value)
 
 
+#: The longest exposure a plan may ask for (ms) and the most per pose: beyond, a typo.
+MAX_EXPOSURE_MS = 3_600_000.0
+MAX_EXPOSURES = 32
+
+
 def _exposures(values: object, where: str) -> tuple[float, ...]:
     if not isinstance(values, list | tuple) or not values:
         raise InputError(f"{where}: exposures_ms = {values!r} must list at least one exposure")
     exposures = tuple(finite_number(v, f"{where}: exposures_ms[{i}]") for i, v in enumerate(values))
+    if len(exposures) > MAX_EXPOSURES:
+        raise InputError(
+            f"{where}: exposures_ms lists {len(exposures)} exposures; at most {MAX_EXPOSURES} "
+            "per pose"
+        )
     for i, value in enumerate(exposures):
-        if value <= 0:
-            raise InputError(f"{where}: exposures_ms[{i}] = {value:g} must be positive")
+        if not 0 < value <= MAX_EXPOSURE_MS:
+            raise InputError(
+                f"{where}: exposures_ms[{i}] = {value:g} must be positive and at most "
+                f"{MAX_EXPOSURE_MS:g} ms (an hour)"
+            )
     return exposures
 
 

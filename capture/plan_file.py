@@ -97,7 +97,13 @@ def _range_values(table: _Table, azimuth: bool) -> list[float]:
         raise ConfigError(f"{table.key('step')} = {step:g} must be positive")
     if stop < start:
         raise ConfigError(f"{table.key('stop')} = {stop:g} is below start = {start:g}")
-    count = math.floor((stop - start) / step + 1e-9) + 1
+    span = (stop - start) / step
+    if not span <= MAX_RANGE_VALUES:  # an overflow (inf) or a typo's step, before any count
+        raise ConfigError(
+            f"{table.path}: {start:g} to {stop:g} in steps of {step:g} gives more than "
+            f"{MAX_RANGE_VALUES} values"
+        )
+    count = math.floor(span + 1e-9) + 1
     if azimuth and start + (count - 1) * step >= start + 360.0 - 1e-9:
         count = math.ceil((360.0 - 1e-9) / step)  # a full turn: the start is not repeated
     if count > MAX_RANGE_VALUES:

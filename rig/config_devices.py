@@ -23,6 +23,8 @@ __all__ = ["XM430_W350", "AxisConfig", "GantryConfig", "LightConfig", "ServoChai
 XM430_W350 = 1020
 _SERVO_KEYS = ("servo_id", "gear_ratio", "velocity_deg_s")
 _GRBL_KEYS = ("grbl_axis", "units_per_deg", "feed_deg_min")
+#: Axis limits beyond ten turns are a typo (or 1e308), never a rig.
+LIMIT_DEG = 3600.0
 
 
 @dataclass(frozen=True)
@@ -84,6 +86,13 @@ class AxisConfig:
             self.device,
             "is not 'dynamixel' or 'grbl'",
         )
+        for name, value in (("min_deg", self.min_deg), ("max_deg", self.max_deg)):
+            _check(
+                -LIMIT_DEG <= value <= LIMIT_DEG,
+                f"{key}.{name}",
+                value,
+                f"must be within +-{LIMIT_DEG:g} degrees (ten turns)",
+            )
         _check(
             self.min_deg < self.max_deg,
             f"{key}.min_deg",
@@ -145,6 +154,12 @@ class AxisConfig:
             )
             _check(
                 self.feed_deg_min > 0, f"{key}.feed_deg_min", self.feed_deg_min, "must be positive"
+            )
+            _check(
+                0.01 <= self.feed_deg_min <= 1e7,
+                f"{key}.feed_deg_min",
+                self.feed_deg_min,
+                "must be between 0.01 and 1e7 degrees a minute",
             )
 
     @property

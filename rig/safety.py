@@ -179,6 +179,10 @@ class SafetyConfig:
             )
         if not self.path_step_deg > 0.0:
             raise ConfigError(f"safety.path_step_deg = {self.path_step_deg!r} must be positive")
+        if not 0.001 <= self.path_step_deg <= 90.0:  # a finer step is millions of checks a move
+            raise ConfigError(
+                f"safety.path_step_deg = {self.path_step_deg!r} must be in [0.001, 90] degrees"
+            )
         names = [zone.name for zone in self.forbidden]
         duplicates = sorted({n for n in names if names.count(n) > 1})
         if duplicates:

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli.args import count, image_size, output_directory, positive
+from app.cli.args import between, count, image_size, output_directory
 from core.errors import InputError
 
 __all__ = ["add_capture", "console_fault_handler", "console_placer"]
@@ -49,13 +49,13 @@ def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--points", type=count, default=20_000, help="--sim: scene points (default 20k)")
     p.add_argument(
         "--exposure-ms",
-        type=positive,
+        type=between(0.001, 3_600_000.0, " ms (an hour)"),
         default=10.0,
         help="--sim: exposure (default 10: the glossy sphere's highlights do not clip)",
     )
     p.add_argument(
         "--speed",
-        type=positive,
+        type=between(0.01, 1000.0),
         default=1.0,
         help="--sim: axis speed factor (default 1: real time)",
     )

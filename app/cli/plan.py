@@ -7,6 +7,7 @@ and moves nothing.
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -51,6 +52,8 @@ def add_plan(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
 
 def format_duration(seconds: float) -> str:
     """``1 h 02 min 03 s``, ``4 min 05 s`` or ``12.3 s``."""
+    if not math.isfinite(seconds):
+        return "beyond any bound"
     if seconds < 60.0:
         return f"{seconds:.1f} s"
     whole = round(seconds)

@@ -482,6 +482,26 @@ def four_light_field(workspace: Workspace, tmp: Path) -> None:
         )
 
 
+def hostile_numbers(workspace: Workspace, tmp: Path) -> None:
+    """The example config and plan with one number at the edge of a float each."""
+    config = Path("docs/rig.example.toml").read_text(encoding="utf-8")
+    plan = Path("docs/plan.example.toml").read_text(encoding="utf-8")
+    for name, text, old, new in (
+        ("step.toml", config, "path_step_deg = 1.0", "path_step_deg = 1e-12"),
+        ("limit.toml", config, "min_deg = -170.0", "min_deg = -1e308"),
+        ("feed.toml", config, "feed_deg_min = 3600.0", "feed_deg_min = 1e-300"),
+        ("exposure.toml", plan, "exposures_ms = [10.0, 40.0, 160.0]", "exposures_ms = [1e308]"),
+        ("many.toml", plan, "exposures_ms = [10.0, 40.0, 160.0]",
+         "exposures_ms = [" + ", ".join(["10.0"] * 50_000) + "]"),
+        ("range.toml", plan, "start = -157.5, stop = 157.5, step = 45",
+         "start = -1e308, stop = 1e308, step = 45"),
+        ("tiny.toml", plan, "start = -157.5, stop = 157.5, step = 45",
+         "start = -157.5, stop = 157.5, step = 5e-324"),
+    ):  # fmt: skip
+        assert old in text, (name, old)
+        (tmp / name).write_text(text.replace(old, new), encoding="utf-8")
+
+
 def two_lights_lp(workspace: Workspace, tmp: Path) -> None:
     """``two.lp`` (two lights from above) and ``escape.lp`` (an entry naming ../x.png)."""
     (tmp / "two.lp").write_text("2\na.png 0 0 1\nb.png 0.5 0 0.87\n")
@@ -1155,6 +1175,16 @@ def _cases() -> list[Case]:
         Case("capture: --cameras 0", (*capture, "--cameras", "0", "-o", "{tmp}/d"), ("--cameras",)),
         Case("capture: --size 0", (*capture, "--size", "0", "-o", "{tmp}/d"), ("--size",)),
         Case(
+            "capture: --exposure-ms 1e12",
+            (*capture, "--exposure-ms", "1e12", "-o", "{tmp}/d"),
+            ("--exposure-ms", "an hour"),
+        ),
+        Case(
+            "capture: --speed 1e-9",
+            (*capture, "--speed", "1e-9", "-o", "{tmp}/d"),
+            ("--speed", "between 0.01 and 1000"),
+        ),
+        Case(
             "capture: --exposure-ms -1",
             (*capture, "--exposure-ms", "-1", "-o", "{tmp}/d"),
             ("--exposure-ms",),
@@ -1234,6 +1264,48 @@ def _cases() -> list[Case]:
             "plan: zero-byte plan",
             ("plan", "--config", "docs/rig.example.toml", "--plan", F + "zero.toml"),
             ("zero.toml",),
+        ),
+        Case(
+            "plan: a path step of 1e-12",
+            ("plan", "--config", "{tmp}/step.toml", "--plan", "docs/plan.example.toml"),
+            ("step.toml", "path_step_deg = 1e-12", "[0.001, 90]"),
+            prepare=hostile_numbers,
+        ),
+        Case(
+            "plan: an axis limit of -1e308",
+            ("plan", "--config", "{tmp}/limit.toml", "--plan", "docs/plan.example.toml"),
+            ("limit.toml", "min_deg", "ten turns"),
+            prepare=hostile_numbers,
+        ),
+        Case(
+            "plan: a feed of 1e-300 deg/min",
+            ("plan", "--config", "{tmp}/feed.toml", "--plan", "docs/plan.example.toml"),
+            ("feed.toml", "feed_deg_min", "0.01"),
+            prepare=hostile_numbers,
+        ),
+        Case(
+            "plan: an exposure of 1e308 ms",
+            ("plan", "--config", "docs/rig.example.toml", "--plan", "{tmp}/exposure.toml"),
+            ("exposure.toml", "exposures_ms[0]", "an hour"),
+            prepare=hostile_numbers,
+        ),
+        Case(
+            "plan: 50,000 exposures a pose",
+            ("plan", "--config", "docs/rig.example.toml", "--plan", "{tmp}/many.toml"),
+            ("many.toml", "50000 exposures", "at most 32"),
+            prepare=hostile_numbers,
+        ),
+        Case(
+            "plan: a range of +-1e308",
+            ("plan", "--config", "docs/rig.example.toml", "--plan", "{tmp}/range.toml"),
+            ("range.toml", "gives more than"),
+            prepare=hostile_numbers,
+        ),
+        Case(
+            "plan: a step of 5e-324",
+            ("plan", "--config", "docs/rig.example.toml", "--plan", "{tmp}/tiny.toml"),
+            ("tiny.toml", "gives more than"),
+            prepare=hostile_numbers,
         ),
         Case(
             "plan: a 100000 x 100000 layout",
