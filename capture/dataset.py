@@ -23,6 +23,7 @@ over the manifest's records, so a dataset whose writer was killed still lists ev
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import replace
@@ -31,12 +32,14 @@ from pathlib import Path
 from typing import Any
 
 from capture.dataset_lock import DatasetLock
+from capture.image_identity import IDENTITY_FIELDS, is_png, with_identity
 from capture.journal import (
     JOURNAL_NAME,
     ImageKey,
     Journal,
     JournalContents,
     completed_images,
+    new_dataset_id,
     read_journal,
 )
 from capture.manifest import (
@@ -51,11 +54,14 @@ from capture.manifest import (
     planned_from,
     read_manifest,
 )
+from capture.origin import Origin, origin_problems
 from capture.verify import VerifyReport, partial_files, verify_files
 from core.atomic import atomic_path, write_json_atomic
 from core.errors import DatasetError, InputError
 
 __all__ = ["Dataset", "ImageKey"]
+
+log = logging.getLogger(__name__)
 
 
 class Dataset:
@@ -71,8 +77,14 @@ class Dataset:
         calibration: dict[str, Any],
         planned: tuple[ImageKey, ...] | None,
         records: Iterable[ImageRecord] = (),
+        dataset_id: str | None = None,
     ) -> None:
         self.path = path
+        self.dataset_id = dataset_id
+        """The dataset's id, written into its journal's runs and its images (None: made before
+        datasets had ids)."""
+        self.origin = Origin()
+        """Whether the manifest, journal and images are of one capture (``capture.origin``)."""
         self.created = created
         self.rig_config = rig_config
         self.plan = plan
@@ -129,14 +141,24 @@ class Dataset:
             plan=plain_json(plan, "plan"),
             calibration=plain_json(calibration or {}, "calibration"),
             planned=keys,
+            dataset_id=new_dataset_id(),
         )
         (root / IMAGES_DIR).mkdir(parents=True, exist_ok=True)
         dataset.save()
         return dataset
 
     @classmethod
-    def open(cls, path: str | os.PathLike[str]) -> Dataset:
+    def open(cls, path: str | os.PathLike[str], *, strict: bool = True) -> Dataset:
         """Load a dataset: its manifest, then the journal's events replayed over the records.
+
+        Parameters
+        ----------
+        path : the dataset directory
+        strict : bool
+            Refuse a dataset whose manifest, journal and images are not of one capture (a
+            journal or a manifest of another dataset, a plan edited after the capture). False
+            keeps the problems in :attr:`origin` for :meth:`verify` to report, and does not
+            replay another dataset's journal.
 
         Raises
         ------
@@ -144,7 +166,8 @@ class Dataset:
             No such directory or manifest; a manifest that is not JSON, has an unknown schema
             version, unknown or missing fields, a bad record, duplicate images or files; a record
             path that is absolute, leaves the directory or is a symlink out of it (the message
-            names the manifest, the record and the path); a corrupt journal.
+            names the manifest, the record and the path); a corrupt journal; when ``strict``, a
+            dataset not of one capture (the message names the file and what to do).
         """
         root = Path(path)
         manifest = root / MANIFEST_NAME
@@ -162,6 +185,7 @@ class Dataset:
             plan=document["plan"],
             calibration=document["calibration"],
             planned=planned_from(document["planned_images"], where),
+            dataset_id=document.get("dataset_id"),
         )
         dataset.journaled = bool(document.get("journaled", False))
         images = document["images"]
@@ -169,12 +193,29 @@ class Dataset:
             raise DatasetError(f"{where}: images must be a list of records")
         for index, data in enumerate(images):
             dataset._add(data, f"{where}, record {index}", replay=False)
+        contents = None
         if (root / JOURNAL_NAME).exists():
             contents = read_journal(root / JOURNAL_NAME)
             dataset.journal = contents
+        dataset.origin = origin_problems(
+            root, dataset.dataset_id, dataset.plan, dataset.records, contents
+        )
+        if strict and dataset.origin.problems:
+            raise DatasetError(dataset.origin.problems[0])
+        if strict and dataset.dataset_id is None and dataset.records:
+            # (rig verify says it in its report instead: it opens with strict=False)
+            log.warning(
+                "note: %s was made before datasets had ids: its images carry no identity of "
+                "their own, so only the records bind them to their poses (rig verify checks "
+                "what it can)",
+                root,
+            )
+        if contents is not None and not dataset.origin.foreign_journal:
+            # (another capture's records are not this dataset's)
             for line, document in zip(contents.lines, contents.documents, strict=True):
                 if document["type"] == "event":
-                    dataset._add(document["record"], f"{contents.path}, line {line}", replay=True)
+                    where = f"{contents.path}, line {line}"
+                    dataset._add(document["record"], where, replay=True)
         return dataset
 
     def _add(self, data: object, where: str, *, replay: bool) -> None:
@@ -207,15 +248,19 @@ class Dataset:
 
     def _manifest(self) -> dict[str, Any]:
         planned = None if self.planned is None else [key.to_dict() for key in self.planned]
-        return {
-            "schema_version": SCHEMA_VERSION,
-            "created": self.created,
-            "rig_config": self.rig_config,
-            "plan": self.plan,
-            "calibration": self.calibration,
-            "planned_images": planned,
-            "images": [record.to_dict() for record in self._records.values()],
-        } | ({"journaled": True} if self.journaled else {})
+        return (
+            {
+                "schema_version": SCHEMA_VERSION,
+                "created": self.created,
+                "rig_config": self.rig_config,
+                "plan": self.plan,
+                "calibration": self.calibration,
+                "planned_images": planned,
+                "images": [record.to_dict() for record in self._records.values()],
+            }
+            | ({"journaled": True} if self.journaled else {})
+            | ({} if self.dataset_id is None else {"dataset_id": self.dataset_id})
+        )
 
     # -- paths --------------------------------------------------------------------------------
 
@@ -313,7 +358,9 @@ class Dataset:
         Returns
         -------
         ImageRecord
-            With the SHA-256 and size of the bytes written. The record is in memory: the executor
+            With the SHA-256 and size of the file written: a PNG with the image's identity
+            written into it (``capture.image_identity``: the dataset id, the key, the exposure and
+            the poses), any other file as given. The record is in memory: the executor
             journals it (:meth:`capture.journal.Journal.event`) and :meth:`save` writes it to the
             manifest.
 
@@ -339,15 +386,20 @@ class Dataset:
         if owner is not None and owner != key:
             raise InputError(f"{draft.file} is already the image of {owner}")
         target = self._confined(draft.file, str(self.path))
+        identity = {"dataset_id": self.dataset_id} | {
+            name: value for name, value in draft.to_dict().items() if name in IDENTITY_FIELDS
+        }
         with atomic_path(target) as temporary:
             if isinstance(data, bytes | bytearray | memoryview):
-                payload = bytes(data)
+                payload = with_identity(bytes(data), identity)
                 temporary.write_bytes(payload)
                 digest, size = hashlib.sha256(payload).hexdigest(), len(payload)
             else:
                 data(temporary)
                 if not temporary.is_file():
                     raise DatasetError(f"{target}: the image writer did not create the file")
+                if _png_file(temporary):
+                    temporary.write_bytes(with_identity(temporary.read_bytes(), identity))
                 digest, size = file_digest(temporary)
         record = replace(draft, sha256=digest, size_bytes=size)
         self._put(record)
@@ -358,8 +410,11 @@ class Dataset:
         self.calibration = plain_json(calibration, "calibration")
 
     def open_journal(self) -> Journal:
-        """The dataset's journal, opened for appending (an unfinished last line is cut off)."""
-        return Journal(self.journal_path)
+        """The dataset's journal, opened for appending (an unfinished last line is cut off).
+
+        Its runs carry the dataset's id, binding them to this dataset.
+        """
+        return Journal(self.journal_path, dataset_id=self.dataset_id)
 
     # -- integrity ----------------------------------------------------------------------------
 
@@ -375,12 +430,15 @@ class Dataset:
         if self.journal_path.exists():  # as it is now (a run may have added to it)
             contents = read_journal(self.journal_path)
             torn = None if contents.truncated is None else contents.truncated.line
-            if self.journaled:
+            # Another capture's journal vouches for nothing here: the origin problem says so.
+            if self.journaled and not self.origin.foreign_journal:
                 journaled = completed_images(contents.documents)
         elif self.journaled:
             journaled = set()
-        report = verify_files(self.path, self.records, self.planned, self.image_path, journaled)
-        return replace(report, torn_journal_line=torn)
+        report = verify_files(
+            self.path, self.records, self.planned, self.image_path, journaled, self.dataset_id
+        )
+        return replace(report, torn_journal_line=torn, origin=self.origin.problems)
 
     def remove_partials(self) -> list[str]:
         """Delete the temporary files a crash left (in ``images/`` and beside the manifest)."""
@@ -388,3 +446,8 @@ class Dataset:
         for relative in removed:
             (self.path / relative).unlink(missing_ok=True)
         return removed
+
+
+def _png_file(path: Path) -> bool:
+    with open(path, "rb") as handle:
+        return is_png(handle.read(8))

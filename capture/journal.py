@@ -6,7 +6,8 @@ Each line is one JSON object, a *document*:
 
 - ``start``: one per run (a first run or a resumed one): ``uid``, ``time``, ``plan`` (a summary),
   ``rig_config_digest`` (see :func:`config_digest`), ``resumed_from`` (the previous run's uid or
-  None) and ``journal_version``.
+  None), ``journal_version`` and ``dataset_id`` (the manifest's, binding the run to its dataset;
+  absent in datasets made before datasets had ids).
 - ``event``: one per completed image: ``uid``, ``run_start``, ``seq_num``, ``time``,
   ``time_start``/``time_end`` (the exposure, epoch seconds) and ``record`` (the image record of
   ``capture.manifest``: indices, kind, commanded and measured pose, exposure, file, SHA-256, size).
@@ -26,6 +27,7 @@ import hashlib
 import json
 import logging
 import os
+import re
 import time
 import uuid
 from collections.abc import Iterable, Mapping
@@ -52,7 +54,9 @@ __all__ = [
     "capture_identity",
     "completed_images",
     "config_digest",
+    "is_dataset_id",
     "last_run_status",
+    "new_dataset_id",
     "parse_json",
     "read_journal",
     "runs",
@@ -74,6 +78,7 @@ ImageKind = Literal["light", "dark", "calibration"]
 IMAGE_KINDS: tuple[str, ...] = get_args(ImageKind)
 ExitStatus = Literal["success", "paused", "aborted", "failed"]
 EXIT_STATUSES: tuple[str, ...] = get_args(ExitStatus)
+_DATASET_ID = re.compile(r"[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}")
 #: A run's status: its stop document's exit status, or "interrupted" when it has none (killed).
 RunStatus = Literal["success", "paused", "aborted", "failed", "interrupted"]
 
@@ -90,6 +95,9 @@ _DOCUMENT_KEYS = {
     "event": {"type", "uid", "run_start", "seq_num", "time", "time_start", "time_end", "record"},
     "stop": {"type", "uid", "run_start", "time", "exit_status", "reason", "num_events", "counts"},
 }
+#: Fields a document may lack: a start's ``dataset_id`` (the manifest's, binding the journal to
+#: its dataset) is absent in journals written before datasets had ids, and in their runs since.
+_OPTIONAL_KEYS = {"start": {"dataset_id"}, "event": set[str](), "stop": set[str]()}
 
 
 def _index(value: object, name: str) -> int:
@@ -164,6 +172,16 @@ class ImageKey:
     def __str__(self) -> str:
         light = "" if self.light_index is None else f" light {self.light_index}"
         return f"{self.kind} camera {self.camera_index}{light} exposure {self.exposure_index}"
+
+
+def new_dataset_id() -> str:
+    """A fresh dataset id (a random UUID), written into the manifest, the runs and the images."""
+    return str(uuid.uuid4())
+
+
+def is_dataset_id(value: object) -> bool:
+    """Whether ``value`` has a dataset id's form (a UUID's 36 characters)."""
+    return isinstance(value, str) and _DATASET_ID.fullmatch(value) is not None
 
 
 def capture_identity(config: Mapping[str, Any]) -> dict[str, Any]:
@@ -244,13 +262,16 @@ def _check_document(document: object, where: str, open_run: str | None) -> dict[
     kind = document.get("type")
     if kind not in _DOCUMENT_KEYS:
         raise DatasetError(f"{where}: unknown document type {kind!r}; expected start/event/stop")
-    keys = set(document)
+    keys = set(document) - _OPTIONAL_KEYS[kind]
     if keys != _DOCUMENT_KEYS[kind]:
         missing = sorted(_DOCUMENT_KEYS[kind] - keys)
         unknown = sorted(keys - _DOCUMENT_KEYS[kind])
         raise DatasetError(f"{where}: {kind} document: missing {missing}, unknown {unknown}")
     if not isinstance(document["uid"], str) or not document["uid"]:
         raise DatasetError(f"{where}: {kind} document has no uid")
+    dataset_id = document.get("dataset_id")
+    if dataset_id is not None and not is_dataset_id(dataset_id):
+        raise DatasetError(f"{where}: dataset_id {dataset_id!r} is not a dataset id")
     if kind != "start" and document["run_start"] != open_run:
         raise DatasetError(
             f"{where}: {kind} document belongs to run {document['run_start']!r}, but the open run "
@@ -426,9 +447,15 @@ class Journal:
     Parameters
     ----------
     path : path of ``journal.jsonl`` (created if missing)
+    dataset_id : str, optional
+        The dataset's id (its manifest's), written into every start document so the journal
+        shows whose it is; None (a dataset made before ids) leaves it out.
     """
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(self, path: str | os.PathLike[str], *, dataset_id: str | None = None) -> None:
+        if dataset_id is not None and not is_dataset_id(dataset_id):
+            raise InputError(f"dataset_id {dataset_id!r} is not a dataset id (a UUID)")
+        self.dataset_id = dataset_id
         self.path = Path(path)
         self.repaired: TruncatedLine | None = None
         existed = self.path.exists()
@@ -481,17 +508,18 @@ class Journal:
     ) -> dict[str, Any]:
         """Begin a run; returns the start document (its ``uid`` names the run)."""
         self._check_writable(run_open=False)
-        document = self._append(
-            {
-                "type": "start",
-                "uid": str(uuid.uuid4()),
-                "time": time.time(),
-                "plan": dict(plan),
-                "rig_config_digest": rig_config_digest,
-                "resumed_from": resumed_from,
-                "journal_version": JOURNAL_VERSION,
-            }
-        )
+        document: dict[str, Any] = {
+            "type": "start",
+            "uid": str(uuid.uuid4()),
+            "time": time.time(),
+            "plan": dict(plan),
+            "rig_config_digest": rig_config_digest,
+            "resumed_from": resumed_from,
+            "journal_version": JOURNAL_VERSION,
+        }
+        if self.dataset_id is not None:
+            document["dataset_id"] = self.dataset_id
+        document = self._append(document)
         self._run, self._events = document["uid"], 0
         return document
 

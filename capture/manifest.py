@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
-from capture.journal import ImageKey, parse_json
+from capture.journal import ImageKey, is_dataset_id, parse_json
 from core.errors import DatasetError, InputError
 
 __all__ = [
@@ -32,6 +32,7 @@ __all__ = [
     "check_image_file",
     "check_relative",
     "file_digest",
+    "named_key",
     "plain_json",
     "planned_from",
     "read_manifest",
@@ -54,8 +55,10 @@ _MANIFEST_KEYS = (
     "images",
 )
 #: ``journaled`` (bool): the executor keeps a journal for the dataset, which must vouch for
-#: every record. Absent in datasets written without the executor.
-_OPTIONAL_MANIFEST_KEYS = ("journaled",)
+#: every record. Absent in datasets written without the executor. ``dataset_id`` (a UUID): the
+#: dataset's identity, written into every run of its journal and every image it stores, so a
+#: journal, a manifest or an image of another dataset shows; absent in datasets made before.
+_OPTIONAL_MANIFEST_KEYS = ("journaled", "dataset_id")
 _RECORD_KEYS = (
     "kind",
     "camera_index",
@@ -71,6 +74,8 @@ _RECORD_KEYS = (
 # Portable names that RTI tools (which split .lp lines on whitespace) and every OS accept.
 _SEGMENT = re.compile(r"[A-Za-z0-9_+-][A-Za-z0-9._+-]*")
 _SHA256 = re.compile(r"[0-9a-f]{64}")
+# The name ImageKey.stem() gives (any zero padding), plus a calibration capture's "_<name>".
+_STEM = re.compile(r"(light|dark|calibration)_c(\d+)(?:_l(\d+))?_e(\d+)(?:_[a-z0-9-]+)?")
 
 
 def check_relative(path: object) -> str:
@@ -141,6 +146,32 @@ def check_image_file(path: object) -> str:
             f"image path {file!r}: the suffix must be one of {' '.join(sorted(IMAGE_EXTENSIONS))}"
         )
     return file
+
+
+def named_key(path: str) -> ImageKey | None:
+    """The image a file's name says it holds (``light_c000_l012_e0.png``), or None.
+
+    The executor names every file ``ImageKey.stem()`` and its suffix, so a record naming a file
+    of another image's name names another image's file. Names of another form (datasets made by
+    hand) say nothing.
+
+    Parameters
+    ----------
+    path : str
+        A record's file, dataset-relative.
+
+    Returns
+    -------
+    ImageKey or None
+    """
+    match = _STEM.fullmatch(PurePosixPath(path).stem)
+    if match is None:
+        return None
+    kind, camera, light, exposure = match.groups()
+    try:
+        return ImageKey(kind, int(camera), None if light is None else int(light), int(exposure))
+    except InputError:  # e.g. a dark frame's name with a light index: no image's name
+        return None
 
 
 def _check_pose(pose: object, name: str) -> dict[str, float]:
@@ -323,6 +354,10 @@ def read_manifest(manifest: Path) -> dict[str, Any]:
         raise DatasetError(f"{manifest}: missing fields {missing}, unknown fields {unknown}")
     if not isinstance(document.get("journaled", False), bool):
         raise DatasetError(f"{manifest}: journaled must be true or false")
+    if "dataset_id" in document and not is_dataset_id(document["dataset_id"]):
+        raise DatasetError(
+            f"{manifest}: dataset_id {document['dataset_id']!r} is not a dataset id (a UUID)"
+        )
     return document
 
 

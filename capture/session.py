@@ -52,6 +52,7 @@ __all__ = [
     "SessionResult",
     "SessionState",
     "TargetPlacer",
+    "require_same_plan",
     "require_same_rig",
 ]
 
@@ -171,6 +172,22 @@ def require_same_rig(dataset: Dataset, config: RigConfig) -> None:
     )
 
 
+def require_same_plan(dataset: Dataset, plan: SweepPlan) -> None:
+    """Refuse to run a plan other than the one a dataset was made with.
+
+    Raises
+    ------
+    DatasetError
+        Naming the dataset and what to do.
+    """
+    if plan.to_dict() != dataset.plan:
+        raise DatasetError(
+            f"{dataset.path} was made with another plan than the one given: its images would "
+            "mix two plans under one index. Resume it with its own plan (rig capture --resume "
+            "DATASET), or capture this plan into a new dataset"
+        )
+
+
 class CaptureSession:
     """Run ``plan`` on ``rig`` into ``dataset``.
 
@@ -257,8 +274,9 @@ class CaptureSession:
         Raises
         ------
         DatasetError
-            Another process captures into the dataset (its lock is held), or the rig's config
-            is not the one the dataset was captured with; nothing was done.
+            Another process captures into the dataset (its lock is held), the rig's config or
+            the plan is not the one the dataset was captured with, or the dataset's manifest,
+            journal and images are not of one capture; nothing was done.
         InputError
             A pose of the plan lies outside the rig's limits; nothing was moved.
             Every other failure ends the run, with its reason, in the result.
@@ -268,6 +286,17 @@ class CaptureSession:
 
     def _check_same_rig(self) -> None:
         require_same_rig(self.dataset, self.rig.config)
+
+    def _check_one_capture(self) -> None:
+        """Refuse a dataset not of one capture, or a plan other than the dataset's own.
+
+        A journal or manifest of another dataset would have its images taken again over the
+        files; an edited plan would be taken as done (the images are keyed by index) while its
+        poses are not the images'.
+        """
+        if self.dataset.origin.problems:
+            raise DatasetError(self.dataset.origin.problems[0])
+        require_same_plan(self.dataset, self.plan)
 
     def _check_journal_vouches(self) -> None:
         """Refuse a dataset whose images the journal does not vouch for.
@@ -288,6 +317,7 @@ class CaptureSession:
 
     def _run(self) -> SessionResult:
         self._check_same_rig()
+        self._check_one_capture()
         self.plan.require_within_limits(self.rig.config)
         self._check_journal_vouches()
         if not self.dataset.journaled:

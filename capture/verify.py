@@ -14,8 +14,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from capture.image_identity import identity_problem, is_png, read_identity
 from capture.journal import ImageKey
-from capture.manifest import IMAGES_DIR, ImageRecord, file_digest
+from capture.manifest import IMAGES_DIR, ImageRecord, file_digest, named_key
 from core.errors import DatasetError
 
 __all__ = ["CorruptImage", "VerifyReport", "partial_files", "verify_files"]
@@ -50,6 +51,10 @@ class VerifyReport:
         was deleted, emptied or cut short): their files cannot be trusted to be this capture's
     torn_journal_line : the journal's unfinished last line (a crash while writing it), ignored;
         harmless, and the next resume removes it
+    origin : the dataset's files that are not of one capture: a journal or a manifest of another
+        dataset, a plan edited since the images were taken (``Dataset.open(strict=False)``)
+    unbound : records whose file carries no identity of its own (a dataset made before images
+        carried one, or a file stored as the camera wrote it): bound by the records alone
     """
 
     path: Path
@@ -62,18 +67,20 @@ class VerifyReport:
     partials: tuple[str, ...] = ()
     unvouched: tuple[ImageRecord, ...] = ()
     torn_journal_line: int | None = None
+    origin: tuple[str, ...] = ()
+    unbound: int = 0
 
     @property
     def complete(self) -> bool:
         """Every planned image has a record whose file is present, intact and journaled."""
-        bad = self.not_taken or self.missing or self.corrupt or self.unvouched
+        bad = self.not_taken or self.missing or self.corrupt or self.unvouched or self.origin
         return self.planned_known and not bad
 
     @property
     def ok(self) -> bool:
-        """Nothing missing, corrupt, unexpected, not journaled or not taken."""
+        """Nothing missing, corrupt, unexpected, not journaled, not taken or of another capture."""
         bad = self.not_taken or self.missing or self.corrupt or self.unexpected or self.unvouched
-        return not bad
+        return not (bad or self.origin)
 
     @property
     def retake(self) -> set[ImageKey]:
@@ -83,7 +90,8 @@ class VerifyReport:
 
     def problems(self) -> list[str]:
         """One line per problem, naming the file (or image) concerned."""
-        lines = [f"not taken: {key}" for key in self.not_taken]
+        lines = list(self.origin)
+        lines += [f"not taken: {key}" for key in self.not_taken]
         lines += [f"missing: {record.file} ({record.key})" for record in self.missing]
         lines += [
             f"corrupt: {bad.record.file} ({bad.record.key}): {bad.reason}" for bad in self.corrupt
@@ -104,6 +112,13 @@ class VerifyReport:
             verdict = "intact (completeness unknown: no planned images listed)"
         head = f"{self.path}: {self.checked} images checked, {verdict}"
         notes = [f"leftover temporary file: {name}" for name in self.partials]
+        if self.unbound:
+            notes.append(
+                f"note: {self.unbound} images carry no identity of their own (made before "
+                "images carried one, or stored as the camera wrote them): only their records "
+                "bind them to their poses, so two of them swapped with their checksums "
+                "re-written would not show"
+            )
         if self.torn_journal_line is not None:
             notes.append(
                 f"journal.jsonl line {self.torn_journal_line}: unfinished last line (a crash), "
@@ -118,6 +133,7 @@ def verify_files(
     planned: Sequence[ImageKey] | None,
     image_path: Callable[[ImageRecord], Path],
     journaled: set[ImageKey] | None = None,
+    dataset_id: str | None = None,
 ) -> VerifyReport:
     """Check a dataset's records against its files: completeness, integrity, stray files.
 
@@ -134,6 +150,9 @@ def verify_files(
         record corrupt (its path leads out of the dataset).
     journaled : set of ImageKey, optional
         The images the journal vouches for, when the dataset keeps one (None: not checked).
+    dataset_id : str, optional
+        The dataset's id: every PNG must carry its identity, of this dataset (None: a dataset
+        made before ids, whose images need not carry one).
 
     Returns
     -------
@@ -142,13 +161,15 @@ def verify_files(
     """
     missing: list[ImageRecord] = []
     corrupt: list[CorruptImage] = []
+    unbound = 0
     for record in records:
         try:
             path = image_path(record)
         except DatasetError as error:
             corrupt.append(CorruptImage(record, str(error)))
             continue
-        reason = _file_problem(path, record)
+        reason, bound = _file_problem(path, record, dataset_id)
+        unbound += not bound and reason != "missing"
         if reason == "missing":
             missing.append(record)
         elif reason:
@@ -169,6 +190,7 @@ def verify_files(
         unvouched=()
         if journaled is None
         else tuple(record for record in records if record.key not in journaled),
+        unbound=unbound,
     )
 
 
@@ -206,16 +228,46 @@ def _strays(root: Path, named: set[str]) -> tuple[list[str], list[str]]:
     return unexpected, partials
 
 
-def _file_problem(path: Path, record: ImageRecord) -> str:
-    """What is wrong with a record's file: nothing (""), "missing", or how it differs."""
+def _file_problem(path: Path, record: ImageRecord, dataset_id: str | None) -> tuple[str, bool]:
+    """What is wrong with a record's file, and whether the file carries its own identity.
+
+    The problem is nothing (""), "missing", or how the file differs from the record. The
+    identity written into the image comes first: it says whose image a file is when its bytes
+    differ too (another dataset's journal or manifest gives every file other checksums).
+    """
     if not path.exists():
-        return "missing"
+        return "missing", False
     if not path.is_file():
-        return "not a regular file"
+        return "not a regular file", False
+    try:
+        identity = read_identity(path)
+    except DatasetError as error:
+        return str(error), False
+    if identity is not None:
+        problem = identity_problem(identity, record.to_dict(), dataset_id)
+        if problem:
+            return problem, True
+    elif dataset_id is not None and _starts_png(path):
+        # Every PNG this dataset stores was written with its identity.
+        return (
+            "a PNG without the identity every image of this dataset is written with: not an "
+            "image this capture stored"
+        ), False
     size = path.stat().st_size
     if size != record.size_bytes:
-        return f"size {size} bytes, the record says {record.size_bytes}"
+        return f"size {size} bytes, the record says {record.size_bytes}", identity is not None
     digest, _ = file_digest(path)
     if digest != record.sha256:
-        return f"SHA-256 {digest}, the record says {record.sha256}"
-    return ""
+        return f"SHA-256 {digest}, the record says {record.sha256}", identity is not None
+    named = named_key(record.file)
+    if named is not None and named != record.key:
+        return (
+            f"its name is that of {named}, the record is of {record.key}: records naming each "
+            "other's files"
+        ), identity is not None
+    return "", identity is not None
+
+
+def _starts_png(path: Path) -> bool:
+    with open(path, "rb") as handle:
+        return is_png(handle.read(8))

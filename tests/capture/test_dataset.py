@@ -248,7 +248,7 @@ def test_retake_replaces_the_record_in_place(tmp_path: Path) -> None:
 def test_journal_events_are_replayed_over_the_manifest(tmp_path: Path) -> None:
     dataset = _dataset(tmp_path / "ds", taken=1)  # the manifest was saved with one record
     with dataset.open_journal() as journal:
-        journal.start(plan={}, rig_config_digest="sha256:0")
+        journal.start(plan=dataset.plan, rig_config_digest="sha256:0")
         for key in KEYS[1:]:
             journal.event(_take(dataset, key), time_start=1.0, time_end=2.0)
     # Killed before save(): the manifest lists one image, the journal three more.
@@ -495,7 +495,7 @@ def test_open_refuses_a_journal_event_that_escapes(tmp_path: Path) -> None:
     dataset = _dataset(tmp_path / "ds", taken=0)
     record = _take(dataset, KEYS[0]).to_dict() | {"file": "images/../../../etc/x.png"}
     with dataset.open_journal() as journal:
-        journal.start(plan={}, rig_config_digest="sha256:0")
+        journal.start(plan=dataset.plan, rig_config_digest="sha256:0")
         journal.event(record, time_start=0.0, time_end=1.0)
     with pytest.raises(DatasetError) as raised:
         Dataset.open(dataset.path)

@@ -270,7 +270,7 @@ CHILD = textwrap.dedent(
     previous = runs(dataset.journal.documents) if dataset.journal else []
     done = completed_images(dataset.journal.documents) if dataset.journal else set()
     journal.start(
-        plan={"lights": 10**6},
+        plan=dataset.plan,
         rig_config_digest="sha256:sim",
         resumed_from=previous[-1].uid if previous else None,
     )

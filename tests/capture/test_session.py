@@ -17,6 +17,7 @@ import pytest
 from app.cli import main
 from capture.dataset import Dataset
 from capture.grid_plan import grid_plan
+from capture.image_identity import strip_identity
 from capture.journal import read_journal
 from capture.plan import SweepPlan
 from capture.session import CaptureSession, SessionResult, SessionState
@@ -64,8 +65,9 @@ def _session(
 
 
 def _digests(path: Path) -> dict[str, str]:
+    # The pixels' file without the identity written into it, which names its own dataset.
     return {
-        f.name: hashlib.sha256(f.read_bytes()).hexdigest()
+        f.name: hashlib.sha256(strip_identity(f.read_bytes())).hexdigest()
         for f in sorted((path / "images").iterdir())
     }
 
