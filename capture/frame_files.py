@@ -3,7 +3,9 @@
 Pixels in memory become lossless files: 16-bit linear PNG for ``uint16`` (cameras and the
 simulated rig's ``linear16`` output), 8-bit PNG for ``uint8``, float32 TIFF for float data. A
 frame the camera already wrote to disk (a DSLR's RAW, a simulated DNG) is stored as is. PNG
-encoding is deterministic, so a simulated capture repeated gives byte-identical files.
+encoding is deterministic, so a simulated capture repeated gives byte-identical pixels' files;
+the dataset then writes the image's identity into each PNG (``capture.image_identity``), which
+names its own dataset.
 """
 
 from __future__ import annotations

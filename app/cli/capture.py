@@ -23,6 +23,20 @@ TARGET_WORDS = {
 #: Exit status of a paused or aborted capture (the shell's convention for Ctrl-C).
 INTERRUPTED = 130
 
+#: The options of ``rig capture --sim`` (what builds the simulated rig and its grid plan), by
+#: flag: the attribute and its default.
+SIM_DEFAULTS: dict[str, tuple[str, object]] = {
+    "--cameras": ("cameras", 6),
+    "--lights": ("lights", 8),
+    "--scene": ("scene", "glossy-sphere"),
+    "--layout": ("layout", "fibonacci"),
+    "--size": ("size", (128, 128)),
+    "--points": ("points", 20_000),
+    "--exposure-ms": ("exposure_ms", 10.0),
+    "--speed": ("speed", 1.0),
+    "--calibrate": ("calibrate", False),
+}
+
 
 def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``rig capture``, ``rig verify`` and ``rig export-lp`` on the ``rig`` parser."""
@@ -39,29 +53,29 @@ def add_capture(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--config", type=Path, help="rig config (TOML)")
     p.add_argument("--plan", type=Path, help="sweep plan (TOML)")
     p.add_argument("--sim", action="store_true", help="the simulated rig, in this process")
-    p.add_argument("--cameras", type=count, default=6, help="--sim: camera poses (default 6)")
-    p.add_argument("--lights", type=count, default=8, help="--sim: light poses (default 8)")
-    p.add_argument("--scene", default="glossy-sphere", help="--sim: scene (default glossy-sphere)")
-    p.add_argument("--layout", choices=("fibonacci", "grid"), default="fibonacci",
+    # The --sim options default to None, so a flag given where it does nothing is told apart
+    # from one left out (SIM_DEFAULTS fills them in).
+    p.add_argument("--cameras", type=count, help="--sim: camera poses (default 6)")
+    p.add_argument("--lights", type=count, help="--sim: light poses (default 8)")
+    p.add_argument("--scene", help="--sim: scene (default glossy-sphere)")
+    p.add_argument("--layout", choices=("fibonacci", "grid"),
                    help="--sim: camera and light layout (default fibonacci)")  # fmt: skip
-    p.add_argument("--size", type=image_size, default=(128, 128),
-                   help="--sim: image WIDTHxHEIGHT (default 128x128)")  # fmt: skip
-    p.add_argument("--points", type=count, default=20_000, help="--sim: scene points (default 20k)")
+    p.add_argument("--size", type=image_size, help="--sim: image WIDTHxHEIGHT (default 128x128)")
+    p.add_argument("--points", type=count, help="--sim: scene points (default 20k)")
     p.add_argument(
         "--exposure-ms",
         type=between(0.001, 3_600_000.0, " ms (an hour)"),
-        default=10.0,
         help="--sim: exposure (default 10: the glossy sphere's highlights do not clip)",
     )
     p.add_argument(
         "--speed",
         type=between(0.01, 1000.0),
-        default=1.0,
         help="--sim: axis speed factor (default 1: real time)",
     )
     p.add_argument(
         "--calibrate",
         action="store_true",
+        default=None,
         help="--sim: take calibration captures first (ChArUco per camera, mirror sphere and "
         "white target per light; docs/calibration.md)",
     )
@@ -114,9 +128,11 @@ def _run_capture(args: argparse.Namespace) -> int:
     from rig.config import load_config, parse_config
     from sim.simulated_rig import simulated_capture_config
 
+    _refuse_conflicting_flags(args)
+    for name, default in SIM_DEFAULTS.values():
+        if getattr(args, name) is None:
+            setattr(args, name, default)
     if args.resume is not None:
-        if args.output is not None or args.plan is not None:
-            raise InputError("--resume continues a dataset: drop -o and --plan")
         dataset = Dataset.open(args.resume)
         config = load_config(args.config) if args.config else parse_config(dataset.rig_config)
         require_same_rig(dataset, config)  # before any port is opened
@@ -136,8 +152,6 @@ def _run_capture(args: argparse.Namespace) -> int:
         else:
             if args.config is None or args.plan is None:
                 raise InputError("a capture needs --config and --plan (or --sim)")
-            if args.calibrate:
-                raise InputError("--calibrate is for --sim; list [[calibration]] in the plan")
             config, plan = load_config(args.config), load_plan(args.plan)
         plan.require_within_limits(config)  # before a dataset folder exists
         dataset = Dataset.create(
@@ -156,6 +170,42 @@ def _run_capture(args: argparse.Namespace) -> int:
     if result.reason:
         print(f"reason: {result.reason}")
     return {"success": 0, "paused": INTERRUPTED, "aborted": INTERRUPTED}.get(result.exit_status, 1)
+
+
+def _refuse_conflicting_flags(args: argparse.Namespace) -> None:
+    """Refuse flags of which one would be ignored, naming both (nothing is opened yet).
+
+    ``--resume`` runs the dataset's own plan on its own rig; ``--sim`` builds both from its
+    options; ``--config`` and ``--plan`` name them. Which side a person meant cannot be guessed.
+
+    Raises
+    ------
+    InputError
+        Naming the flags that conflict and what each does.
+    """
+    given = [flag for flag, (name, _) in SIM_DEFAULTS.items() if getattr(args, name) is not None]
+    if args.resume is not None:
+        ignored = [f for f, on in (("-o", args.output), ("--plan", args.plan)) if on is not None]
+        ignored += ["--sim"] * bool(args.sim) + given
+        if ignored:
+            raise InputError(
+                f"--resume {args.resume} continues that dataset with its own plan and rig; "
+                f"{' '.join(ignored)} would be ignored: drop {'them' if len(ignored) > 1 else 'it'}"
+                " (to capture another plan, start a new dataset with -o)"
+            )
+    elif args.sim:
+        named = [f for f, on in (("--config", args.config), ("--plan", args.plan)) if on]
+        if named:
+            raise InputError(
+                f"--sim makes its own rig and grid plan (--cameras, --lights, ...), so "
+                f"{' and '.join(named)} would be ignored: give --sim, or --config and --plan "
+                "for a rig and a plan of your own, not both"
+            )
+    elif given:
+        raise InputError(
+            f"{' '.join(given)}: for --sim only; with --config and --plan the plan file says "
+            "what to take (list [[calibration]] in it for calibration captures)"
+        )
 
 
 def _say_what_is_left_out(plan: Any, config: Any, listed: int = 3) -> None:
@@ -244,7 +294,8 @@ def _run_verify(args: argparse.Namespace) -> int:
         check = check_store(args.dataset, progress=not args.quiet)
         print(check.summary())
         return 0 if check.ok else 1
-    report = Dataset.open(args.dataset).verify()
+    # Not strict: a journal or manifest of another dataset is damage to report, not a refusal.
+    report = Dataset.open(args.dataset, strict=False).verify()
     print(report.summary())  # the verdict and each problem, once
     return 0 if report.ok and report.complete else 1
 

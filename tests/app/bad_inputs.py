@@ -24,19 +24,23 @@ tests.app.bad_inputs`` runs the sweep and prints the counts per outcome.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import io
 import itertools
+import json
 import os
 import re
 import shutil
 import signal
 import sys
 import traceback
+import uuid
 from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
+from typing import Any
 
 import numpy as np
 
@@ -347,6 +351,104 @@ def deep_journal_line(workspace: Workspace, tmp: Path) -> None:
     lines = journal.read_text().splitlines(keepends=True)
     lines[1] = '{"type": ' + "[" * DEEP + "]" * DEEP + "}\n"
     journal.write_text("".join(lines))
+
+
+def _dataset_documents(dataset: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    manifest = json.loads((dataset / "manifest.json").read_text())
+    lines = (dataset / "journal.jsonl").read_text().splitlines()
+    return manifest, [json.loads(line) for line in lines]
+
+
+def _write_documents(dataset: Path, manifest: dict[str, Any], journal: list[Any]) -> None:
+    (dataset / "manifest.json").write_text(json.dumps(manifest))
+    (dataset / "journal.jsonl").write_text("".join(json.dumps(d) + "\n" for d in journal))
+
+
+def _records(manifest: dict[str, Any], journal: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Every image record: the manifest's and the journal events'."""
+    events = [document["record"] for document in journal if document["type"] == "event"]
+    return [*manifest["images"], *events]
+
+
+def _revouch(dataset: Path) -> None:
+    """Write every file's SHA-256 and size into its records, as a 'repair' script would."""
+    manifest, journal = _dataset_documents(dataset)
+    for record in _records(manifest, journal):
+        data = (dataset / record["file"]).read_bytes()
+        record.update(sha256=hashlib.sha256(data).hexdigest(), size_bytes=len(data))
+    _write_documents(dataset, manifest, journal)
+
+
+def _two_light_images(dataset: Path) -> tuple[str, str]:
+    names = sorted(p.name for p in (dataset / "images").iterdir() if p.name.startswith("light"))
+    return f"images/{names[-2]}", f"images/{names[-1]}"
+
+
+def swapped_images(workspace: Workspace, tmp: Path) -> None:
+    """A dataset whose two light images were swapped, every checksum then re-vouched."""
+    dataset = _copy_dataset(workspace, tmp)
+    a, b = (dataset / name for name in _two_light_images(dataset))
+    data = a.read_bytes()
+    a.write_bytes(b.read_bytes())
+    b.write_bytes(data)
+    _revouch(dataset)
+
+
+def records_naming_each_others_files(workspace: Workspace, tmp: Path) -> None:
+    """A dataset whose two records name each other's files (checksums following the files)."""
+    dataset = _copy_dataset(workspace, tmp)
+    a, b = _two_light_images(dataset)
+    manifest, journal = _dataset_documents(dataset)
+    for record in _records(manifest, journal):
+        record["file"] = {a: b, b: a}.get(record["file"], record["file"])
+    _write_documents(dataset, manifest, journal)
+    _revouch(dataset)
+
+
+#: The dataset id of "another dataset" (a UUID's form).
+OTHER_DATASET = "0e7e7000-0000-4000-8000-000000000000"
+
+
+def _as_another_capture(documents: list[dict[str, Any]]) -> None:
+    """Records and runs as another capture of the same plan would have written them.
+
+    Other checksums (no two captures give the same bytes: sensor noise), other run uids, and
+    the other dataset's id where the documents carry one.
+    """
+    uids: dict[str, str] = {}
+    for document in documents:
+        record = document.get("record", document)
+        if "sha256" in record:
+            record["sha256"] = hashlib.sha256(record["sha256"].encode()).hexdigest()
+        for name in ("uid", "run_start", "resumed_from"):
+            if isinstance(document.get(name), str):
+                document[name] = uids.setdefault(document[name], str(uuid.uuid4()))
+        if "dataset_id" in document:
+            document["dataset_id"] = OTHER_DATASET
+
+
+def another_datasets_journal(workspace: Workspace, tmp: Path) -> None:
+    """A dataset holding the journal of another capture of the same plan."""
+    dataset = _copy_dataset(workspace, tmp)
+    manifest, journal = _dataset_documents(dataset)
+    _as_another_capture(journal)
+    _write_documents(dataset, manifest, journal)
+
+
+def another_datasets_manifest(workspace: Workspace, tmp: Path) -> None:
+    """A dataset holding the manifest of another capture of the same plan."""
+    dataset = _copy_dataset(workspace, tmp)
+    manifest, journal = _dataset_documents(dataset)
+    _as_another_capture([manifest, *manifest["images"]])
+    _write_documents(dataset, manifest, journal)
+
+
+def moved_light(workspace: Workspace, tmp: Path) -> None:
+    """A dataset whose plan was edited in its manifest after the capture: a light moved."""
+    dataset = _copy_dataset(workspace, tmp)
+    manifest, journal = _dataset_documents(dataset)
+    manifest["plan"]["lights"][1][0] += 20.0
+    _write_documents(dataset, manifest, journal)
 
 
 def altered_attribute(name: str, value: object) -> Prepare:
@@ -1039,6 +1141,46 @@ def _cases() -> list[Case]:
             stdout=True,
         ),
         Case(
+            "verify: two images swapped, checksums re-vouched",
+            ("verify", "{tmp}/dataset"),
+            ("NOT OK", "holds the image of", "swapped or renamed"),
+            status=1,
+            prepare=swapped_images,
+            stdout=True,
+        ),
+        Case(
+            "verify: records naming each other's files",
+            ("verify", "{tmp}/dataset"),
+            ("NOT OK", "holds the image of", "swapped or renamed"),
+            status=1,
+            prepare=records_naming_each_others_files,
+            stdout=True,
+        ),
+        Case(
+            "verify: another dataset's journal",
+            ("verify", "{tmp}/dataset"),
+            ("journal.jsonl belongs to another dataset", OTHER_DATASET, "put back"),
+            status=1,
+            prepare=another_datasets_journal,
+            stdout=True,
+        ),
+        Case(
+            "verify: another dataset's manifest",
+            ("verify", "{tmp}/dataset"),
+            ("manifest.json belongs to another dataset", OTHER_DATASET, "put back"),
+            status=1,
+            prepare=another_datasets_manifest,
+            stdout=True,
+        ),
+        Case(
+            "verify: a light moved in the plan",
+            ("verify", "{tmp}/dataset"),
+            ("differs from the plan the dataset was captured with", "lights[1] was"),
+            status=1,
+            prepare=moved_light,
+            stdout=True,
+        ),
+        Case(
             "verify: a manifest not JSON",
             ("verify", "{tmp}/dataset"),
             ("manifest.json",),
@@ -1095,6 +1237,36 @@ def _cases() -> list[Case]:
         ),
         Case("process: a cut image", process, ("corrupt",), prepare=corrupt_image),
         Case("process: an emptied journal", process, ("journal",), prepare=empty_journal),
+        Case(
+            "process: two images swapped, checksums re-vouched",
+            process,
+            ("corrupt", "holds the image of", "swapped or renamed"),
+            prepare=swapped_images,
+        ),
+        Case(
+            "process: records naming each other's files",
+            process,
+            ("corrupt", "holds the image of", "swapped or renamed"),
+            prepare=records_naming_each_others_files,
+        ),
+        Case(
+            "process: another dataset's journal",
+            process,
+            ("journal.jsonl belongs to another dataset", OTHER_DATASET, "put back"),
+            prepare=another_datasets_journal,
+        ),
+        Case(
+            "process: another dataset's manifest",
+            process,
+            ("manifest.json belongs to another dataset", OTHER_DATASET, "put back"),
+            prepare=another_datasets_manifest,
+        ),
+        Case(
+            "process: a light moved in the plan",
+            process,
+            ("differs from the plan the dataset was captured with", "lights[1] was"),
+            prepare=moved_light,
+        ),
         Case(
             "process: a journal line nested 200,000 deep",
             process,
@@ -1214,6 +1386,55 @@ def _cases() -> list[Case]:
             ("capture", "--resume", "{tmp}/dataset", "--quiet"),
             ("journal.jsonl, line 2", "JSON nested too deeply"),
             prepare=deep_journal_line,
+        ),
+        Case(
+            "capture: --resume with another dataset's journal",
+            ("capture", "--resume", "{tmp}/dataset", "--quiet"),
+            ("journal.jsonl belongs to another dataset", OTHER_DATASET, "put back"),
+            prepare=another_datasets_journal,
+        ),
+        Case(
+            "capture: --resume with another dataset's manifest",
+            ("capture", "--resume", "{tmp}/dataset", "--quiet"),
+            ("manifest.json belongs to another dataset", OTHER_DATASET, "put back"),
+            prepare=another_datasets_manifest,
+        ),
+        Case(
+            "capture: --resume a light moved in the plan",
+            ("capture", "--resume", "{tmp}/dataset", "--quiet"),
+            ("differs from the plan the dataset was captured with", "start a new dataset"),
+            prepare=moved_light,
+        ),
+        Case(
+            "capture: --sim with --config",
+            (*capture, "--config", "docs/rig.example.toml", "-o", "{tmp}/d"),
+            ("--sim makes its own rig", "--config would be ignored", "not both"),
+        ),
+        Case(
+            "capture: --sim with --plan",
+            (*capture, "--plan", "docs/plan.example.toml", "-o", "{tmp}/d"),
+            ("--sim makes its own rig", "--plan would be ignored", "not both"),
+        ),
+        Case(
+            "capture: --resume with --sim --cameras 9",
+            ("capture", "--resume", "{tmp}/dataset", "--sim", "--cameras", "9", "--quiet"),
+            ("--resume", "--sim --cameras would be ignored", "drop them"),
+            prepare=copy_dataset,
+        ),
+        Case(
+            "capture: --cameras with --config and --plan",
+            (
+                "capture",
+                "--config",
+                "docs/rig.example.toml",
+                "--plan",
+                "docs/plan.example.toml",
+                "--cameras",
+                "9",
+                "-o",
+                "{tmp}/d",
+            ),
+            ("--cameras", "for --sim only"),
         ),
         Case(
             "capture: --resume another config",
