@@ -23,7 +23,9 @@ from core.memory_budget import available_memory, format_size
 from core.progress import progress_bar
 
 __all__ = [
+    "ADDRESS_SCHEMES",
     "CONNECT_TIMEOUT_S",
+    "check_dask_spec",
     "compute_each",
     "dask_client",
     "worker_memory",
@@ -31,6 +33,53 @@ __all__ = [
 
 #: Seconds to wait for an existing scheduler to answer before giving up.
 CONNECT_TIMEOUT_S = 10.0
+
+#: Schemes of a scheduler address that another process can reach: Dask's network transports.
+#: (``inproc://`` lives inside one process, ``ucx://`` needs a library this project lacks.)
+ADDRESS_SCHEMES = ("tcp", "tls", "ws", "wss")
+
+#: What ``--dask`` accepts, as every refusal says it.
+ACCEPTED = (
+    "give 'local' (a cluster on this machine) or a scheduler's address SCHEME://HOST:PORT "
+    f"with SCHEME one of {', '.join(ADDRESS_SCHEMES)} (e.g. tcp://host:8786)"
+)
+
+
+def check_dask_spec(spec: str) -> str:
+    """``spec`` when it is ``local`` or a scheduler address Dask can dial; refused otherwise.
+
+    Checked before any work (the command line checks it as it is parsed): distributed's own
+    answer to ``bogus://x`` or ``tcp://host`` is a ValueError from deep in its registry.
+
+    Parameters
+    ----------
+    spec : str, ``local`` or ``SCHEME://HOST:PORT`` (:data:`ADDRESS_SCHEMES`; an IPv6 host in
+        brackets, ``tcp://[::1]:8786``)
+
+    Returns
+    -------
+    str
+        ``spec`` unchanged.
+
+    Raises
+    ------
+    InputError
+        Anything else, naming the value and the accepted forms.
+    """
+    if spec == "local":
+        return spec
+    scheme, separator, location = spec.partition("://")
+    if not separator:
+        raise InputError(f"--dask {spec!r}: {ACCEPTED}")
+    if scheme not in ADDRESS_SCHEMES:
+        raise InputError(f"--dask {spec!r}: unknown scheme {scheme + '://'!r}; {ACCEPTED}")
+    host, colon, port = location.rpartition(":")
+    bracketed = host.startswith("[") and host.endswith("]")
+    if not colon or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise InputError(f"--dask {spec!r}: no port 1..65535 after the host; {ACCEPTED}")
+    if any(c.isspace() or c in "/?#@" for c in host) or (":" in host and not bracketed):
+        raise InputError(f"--dask {spec!r}: {host!r} is not a host name or address; {ACCEPTED}")
+    return spec
 
 
 @contextlib.contextmanager
@@ -45,7 +94,8 @@ def dask_client(
 
     Parameters
     ----------
-    spec : None, ``"local"`` or a scheduler address (``tcp://host:port``)
+    spec : None, ``"local"`` or a scheduler address (``tcp://host:port``; see
+        :func:`check_dask_spec`)
     workers : int, optional; worker processes of a local cluster (default: the cores)
     memory_limit : int, optional; bytes per local worker (default: the available memory
         shared among them); Dask pauses, then restarts, a worker that goes over it
@@ -54,9 +104,9 @@ def dask_client(
     Raises
     ------
     InputError
-        ``spec`` is neither ``local`` nor an address.
+        ``spec`` is neither ``local`` nor an address (:func:`check_dask_spec`).
     ClusterError
-        The scheduler at the address did not answer.
+        The scheduler at the address did not answer, or its transport could not be set up.
     """
     if spec is None:
         yield None
@@ -85,11 +135,7 @@ def dask_client(
                       f"{format_size(limit)} each", dashboard)  # fmt: skip
             yield client
         return
-    if "://" not in spec:
-        raise InputError(
-            f"--dask {spec!r}: give 'local' (a cluster on this machine) or a scheduler address "
-            "such as tcp://host:8786"
-        )
+    check_dask_spec(spec)
     try:
         client = Client(spec, timeout=CONNECT_TIMEOUT_S)
     except (OSError, TimeoutError) as error:
@@ -97,6 +143,13 @@ def dask_client(
             f"the Dask scheduler at {spec} did not answer within {CONNECT_TIMEOUT_S:.0f} s "
             f"({error}); start it (dask scheduler, then dask worker {spec} on each machine) or "
             "use --dask local"
+        ) from error
+    except (TypeError, ValueError) as error:
+        # What the address's transport wants and lacks: tls:// without Dask's TLS settings
+        # (distributed.comm.tls.*) is a TypeError about an ssl_context.
+        raise ClusterError(
+            f"cannot connect to the Dask scheduler at {spec}: {error}; for tls:// set Dask's "
+            "TLS configuration (distributed.comm.tls), or use tcp:// or --dask local"
         ) from error
     with client:
         workers_seen = len(client.scheduler_info().get("workers", {}))

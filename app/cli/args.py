@@ -28,6 +28,7 @@ __all__ = [
     "angles",
     "check_file_arguments",
     "count",
+    "dask_spec",
     "finite",
     "image_size",
     "names_among",
@@ -260,10 +261,22 @@ def add_memory_option(p: argparse.ArgumentParser) -> None:
     )
 
 
+def dask_spec(text: str) -> str:
+    """``--dask``: ``local`` or a scheduler address (:func:`core.cluster.check_dask_spec`)."""
+    from core.cluster import check_dask_spec
+
+    try:
+        return check_dask_spec(text)
+    except InputError as error:
+        # argparse says "argument --dask:" already.
+        raise argparse.ArgumentTypeError(str(error).removeprefix("--dask ")) from None
+
+
 def add_dask_options(p: argparse.ArgumentParser) -> None:
     """``--dask`` and the local cluster's size: where a stage runs (:func:`cluster_for`)."""
     p.add_argument(
         "--dask",
+        type=dask_spec,
         metavar="local|tcp://HOST:PORT",
         help="run the work as Dask tasks: 'local' starts a cluster of one worker per core on "
         "this machine, an address uses a running scheduler (docs/scale.md); the results are "
