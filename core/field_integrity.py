@@ -7,13 +7,18 @@ through these functions: a missing chunk, a chunk that does not decode, and a no
 value are each a :class:`~core.errors.DatasetError` naming the store, the chunk's file and
 (for values) the count and the first location.
 
+Before any of that, :func:`open_array` holds an array's metadata (its ``zarr.json``) to the
+layout (:data:`core.field_schema.ARRAYS`): a shape with a negative size, chunks of another
+rank, a dtype the store never holds (float32 edited to int32 reads the same bytes as other
+numbers) are named with the store, the array and the value, not in zarr's words (" `chunk_shape`
+and `shape` need to have the same number of dimensions").
+
 Stores are local directories (zarr's ``LocalStore``); a chunk's file is
 ``STORE/ARRAY/<chunk key>``, the key as the array's metadata encodes it (``c/s/t/0/0``).
 """
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 import math
 from collections.abc import Iterable
@@ -27,20 +32,130 @@ from numpy.typing import NDArray
 
 from core.errors import DatasetError
 from core.field_attributes import direction_problem, read_attributes
+from core.field_digests import (
+    REBUILD,
+    array_document,
+    binding_problems,
+    combined_digest,
+    read_record,
+    slab_digest,
+    unbound_note,
+)
+from core.field_schema import ARRAYS
 from core.progress import progress_bar
 
 __all__ = [
     "CHUNK_MEANING",
     "StoreCheck",
+    "array_names",
     "check_store",
     "chunk_file",
+    "metadata_problem",
     "missing_chunks",
     "non_finite",
+    "open_array",
     "radiance_digest",
     "read_checked",
     "require_complete",
     "slab_digest",
 ]
+
+
+# --- an array's metadata ----------------------------------------------------------------------
+
+
+def array_names(root: Path) -> list[str]:
+    """The arrays of the store at ``root``, by their folders.
+
+    Not zarr's listing: it leaves out, with only a warning, an array whose metadata it cannot
+    parse, and the store would then seem to lack it.
+    """
+    return sorted(
+        folder.name
+        for folder in root.iterdir()
+        if folder.is_dir() and any((folder / name).is_file() for name in ("zarr.json", ".zarray"))
+    )
+
+
+def _sizes(value: object) -> bool:
+    return isinstance(value, list) and all(
+        isinstance(n, int) and not isinstance(n, bool) for n in value
+    )
+
+
+def _dtype_name(value: object) -> str:
+    try:
+        return np.dtype(value).name if isinstance(value, str) else repr(value)
+    except TypeError:
+        return repr(value)
+
+
+def metadata_problem(root: Path, name: str) -> str | None:
+    """What in array ``name``'s metadata document no field store holds, or None.
+
+    Raises
+    ------
+    DatasetError
+        The document is not readable JSON (named by :func:`core.field_digests.array_document`).
+    """
+    document = array_document(root, name)
+    if document.get("node_type", "array") != "array":
+        return f"it is a {document.get('node_type')!r}, not an array"
+    shape = document.get("shape")
+    grid = document.get("chunk_grid")
+    configuration = grid.get("configuration") if isinstance(grid, dict) else None
+    chunks = (configuration.get("chunk_shape") if isinstance(configuration, dict)
+              else document.get("chunks"))  # fmt: skip
+    if shape is None:
+        return "it states no shape"
+    if not _sizes(shape):
+        return f"its shape {shape!r} is not a list of sizes"
+    assert isinstance(shape, list)
+    if any(n < 0 for n in shape):
+        return f"its shape {shape} holds a negative size"
+    if not _sizes(chunks):
+        return f"its chunk shape {chunks!r} is not a list of sizes"
+    assert isinstance(chunks, list)
+    if len(chunks) != len(shape):
+        return (
+            f"its shape {shape} has {len(shape)} dimensions and its chunk shape {chunks} "
+            f"{len(chunks)}"
+        )
+    if any(c < 1 for c in chunks):
+        return f"its chunk shape {chunks} holds a size below 1"
+    spec = ARRAYS.get(name)
+    if spec is None:
+        return None
+    if len(shape) != spec.rank:
+        return f"its shape {shape} has {len(shape)} dimensions; {name} is {spec.shape}"
+    dtype = _dtype_name(document.get("data_type", document.get("dtype")))
+    if dtype not in spec.dtypes:
+        return f"its dtype is {dtype}; a field store holds {name} in {' or '.join(spec.dtypes)}"
+    return None
+
+
+def open_array(root: Path, group: Any, name: str) -> Any:
+    """Array ``name`` of the store's ``group``, its metadata held to the layout first.
+
+    Raises
+    ------
+    DatasetError
+        Naming the store, the array, its metadata file and what is wrong there.
+    """
+    problem = metadata_problem(root, name)
+    if problem is None:
+        try:
+            array = group[name]
+        except Exception as error:  # zarr raises several types for metadata it cannot parse
+            problem = f"zarr cannot read it ({type(error).__name__}: {error})"
+        else:
+            if isinstance(array, zarr.Array):
+                return array
+            problem = "it is not an array"
+    raise DatasetError(
+        f"{root}: array {name!r} ({name}/zarr.json): {problem}: its metadata was altered; "
+        f"{REBUILD}"
+    )
 
 
 def _chunk_grid(array: Any) -> list[int]:
@@ -161,18 +276,12 @@ def non_finite(values: NDArray[np.floating]) -> tuple[int, tuple[int, ...]] | No
 # --- the radiance digest --------------------------------------------------------------------
 
 
-def slab_digest(values: NDArray[np.floating]) -> bytes:
-    """SHA-256 of one (camera, light) slab (P, 3) in its storage dtype."""
-    # The array's own buffer, not a copy of it (a 24-megapixel float32 slab is 288 MB).
-    return hashlib.sha256(np.ascontiguousarray(values).data).digest()
-
-
 def radiance_digest(slab_digests: Iterable[bytes]) -> str:
-    """The store's ``radiance_digest``: SHA-256 over the slabs' digests, camera then light order."""
-    digest = hashlib.sha256()
-    for value in slab_digests:
-        digest.update(value)
-    return digest.hexdigest()
+    """The store's ``radiance_digest``: SHA-256 over the slabs' digests, camera then light order.
+
+    Each slab's is :func:`slab_digest` (SHA-256 of the slab (P, 3) in its storage dtype).
+    """
+    return combined_digest(slab_digests)
 
 
 # --- a whole store --------------------------------------------------------------------------
@@ -197,6 +306,8 @@ class StoreCheck:
     digest : "matches", "differs", "not recorded" (stores written before it was) or
         "not checked" (chunks could not be read)
     problems : list of str, each a damage found (empty: intact)
+    notes : list of str, what the check could not bind (a store written before its writer
+        recorded digests of every array and attribute), and what to do
     """
 
     path: Path
@@ -204,6 +315,7 @@ class StoreCheck:
     chunks: int
     digest: str
     problems: tuple[str, ...]
+    notes: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -211,7 +323,7 @@ class StoreCheck:
         return not self.problems
 
     def summary(self) -> str:
-        """The verdict, then each problem on a line of its own."""
+        """The verdict, then each problem on a line of its own, then each note."""
         if self.shape is None:
             head = f"{self.path}: not a readable field store"
         else:
@@ -221,32 +333,64 @@ class StoreCheck:
                 f"{self.chunks} radiance slabs read, radiance digest {self.digest}"
             )
         verdict = "intact" if self.ok else f"DAMAGED ({len(self.problems)} problems)"
-        return "\n".join([f"{head}: {verdict}", *(f"  {line}" for line in self.problems)])
+        return "\n".join(
+            [f"{head}: {verdict}", *(f"  {line}" for line in self.problems),
+             *(f"  note: {line}" for line in self.notes)]
+        )  # fmt: skip
 
 
-def _attribute_problems(path: Path, group: Any, shape: tuple[int, int, int]) -> list[str]:
+def _problem(path: Path, error: DatasetError) -> str:
+    return str(error).removeprefix(f"{path}: ")
+
+
+def _attribute_problems(
+    path: Path, attrs: dict[str, Any], shape: tuple[int, int, int], values: dict[str, Any]
+) -> list[str]:
     """What :mod:`core.field_attributes` refuses in the store's attributes and directions."""
     problems = []
     try:
-        read_attributes(path, dict(group.attrs), shape)
+        read_attributes(path, attrs, shape)
     except DatasetError as error:
-        problems.append(str(error).removeprefix(f"{path}: "))
-    names = set(group.array_keys())
+        problems.append(_problem(path, error))
     for name, singular in (("light_directions", "light direction"),
                            ("camera_directions", "camera direction")):  # fmt: skip
-        if name in names:
-            try:
-                values = np.asarray(group[name][...])
-            except Exception:  # unreadable: reported with the arrays
-                continue
-            problem = direction_problem(singular, values)
-            if problem is not None and np.isfinite(values).all():  # non-finite: said above
+        if name in values:
+            problem = direction_problem(singular, values[name])
+            if problem is not None and np.isfinite(values[name]).all():  # non-finite: said above
                 problems.append(problem)
     return problems
 
 
+def _opened(path: Path) -> tuple[Any, dict[str, Any], list[str]]:
+    """The store's group, its arrays that open (by name) and the problems of those that don't.
+
+    Raises
+    ------
+    DatasetError
+        Not a store, or a store without radiance.
+    """
+    try:
+        group: Any = zarr.open_group(str(path), mode="r")
+        names = array_names(path)
+    except Exception as error:  # zarr raises several types for non-stores
+        raise DatasetError(f"cannot open: {error}") from None
+    if "radiance" not in names:
+        raise DatasetError("the store has no 'radiance' array")
+    arrays: dict[str, Any] = {}
+    problems = []
+    for name in names:
+        try:
+            arrays[name] = open_array(path, group, name)
+        except DatasetError as error:
+            problems.append(_problem(path, error))
+    return group, arrays, problems
+
+
 def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
-    """Read every chunk of the field store at ``path``: present, decodable, finite, digest.
+    """Read every chunk of the field store at ``path``: present, decodable, finite, digests.
+
+    Every array's metadata is held to the layout, every value read, and every array and
+    attribute compared with the digests its writer recorded (:mod:`core.field_digests`).
 
     Parameters
     ----------
@@ -254,14 +398,15 @@ def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
     progress : bool, show a progress bar over the radiance chunks
     """
     try:
-        group: Any = zarr.open_group(str(path), mode="r")
-        radiance = group["radiance"]
-    except Exception as error:  # zarr raises several types for non-stores
-        return StoreCheck(path, None, 0, "not checked", (f"cannot open: {error}",))
-    problems: list[str] = []
+        group, arrays, problems = _opened(path)
+    except DatasetError as error:
+        return StoreCheck(path, None, 0, "not checked", (str(error),))
+    if "radiance" not in arrays:
+        return StoreCheck(path, None, 0, "not checked", tuple(problems))
+    radiance = arrays["radiance"]
     incomplete: set[tuple[int, int]] = set()  # slabs with a chunk missing
-    for name in sorted(group.array_keys()):
-        array = group[name]
+    values: dict[str, NDArray[Any]] = {}  # the other arrays, read whole
+    for name, array in arrays.items():
         missing = missing_chunks(path, array)
         if missing:
             problems.append(_missing_message(path, array, missing))
@@ -269,14 +414,36 @@ def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
                 incomplete = {(index[0], index[1]) for index in missing}
         elif name != "radiance":
             try:
-                values = read_checked(path, array)
+                values[name] = read_checked(path, array)
             except DatasetError as error:
-                problems.append(str(error).removeprefix(f"{path}: "))
+                problems.append(_problem(path, error))
                 continue
-            if values.dtype.kind == "f" and (found := non_finite(values)) is not None:
+            if values[name].dtype.kind == "f" and (found := non_finite(values[name])):
                 problems.append(f"{found[0]} non-finite values in {name!r}, first at {found[1]}")
     s, t, p, _ = radiance.shape
-    problems += _attribute_problems(path, group, (s, t, p))
+    attrs = dict(group.attrs)
+    problems += _attribute_problems(path, attrs, (s, t, p), values)
+    digests, unreadable = _radiance_slabs(path, radiance, incomplete, problems, progress)
+    digest = _radiance_verdict(path, attrs, None if unreadable else digests, problems)
+    try:
+        problems += binding_problems(path, attrs, arrays, values)
+    except DatasetError as error:
+        if _problem(path, error) not in problems:
+            problems.append(_problem(path, error))
+    note = unbound_note(attrs, arrays, path)
+    return StoreCheck(path, (s, t, p), len(digests), digest, tuple(problems),
+                      () if note is None else (note,))  # fmt: skip
+
+
+def _radiance_slabs(
+    path: Path, radiance: Any, incomplete: set[tuple[int, int]], problems: list[str],
+    progress: bool,
+) -> tuple[list[bytes], bool]:
+    """Every slab's digest (camera then light order) and whether any was unreadable.
+
+    Damage and non-finite values are appended to ``problems``.
+    """
+    s, t = radiance.shape[:2]
     digests: list[bytes] = []
     unreadable = False
     keys = [(a, b) for a in range(s) for b in range(t)]
@@ -287,7 +454,7 @@ def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
         try:
             values = read_checked(path, radiance, (a, b))
         except DatasetError as error:
-            problems.append(str(error).removeprefix(f"{path}: "))
+            problems.append(_problem(path, error))
             unreadable = True
             continue
         found = non_finite(values)
@@ -297,17 +464,26 @@ def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
                 f"sample {found[1][0]}"
             )
         digests.append(slab_digest(values))
-    recorded = group.attrs.get("radiance_digest")
-    if unreadable:
-        digest = "not checked"
-    elif recorded is None:
-        digest = "not recorded"
-    elif radiance_digest(digests) == recorded:
-        digest = "matches"
-    else:
-        digest = "differs"
-        problems.append(
-            "the radiance differs from what was written (its digest does not match the one "
-            "recorded): a chunk was altered or replaced"
-        )
-    return StoreCheck(path, (s, t, p), len(digests), digest, tuple(problems))
+    return digests, unreadable
+
+
+def _radiance_verdict(
+    path: Path, attrs: dict[str, Any], digests: list[bytes] | None, problems: list[str]
+) -> str:
+    """The radiance digest's verdict ("matches", ...); a difference goes to ``problems``."""
+    try:
+        record = read_record(path, attrs)
+    except DatasetError:  # named with the other bindings
+        record = None
+    recorded = attrs.get("radiance_digest") if record is None else record.data.get("radiance")
+    if digests is None:
+        return "not checked"
+    if recorded is None:
+        return "not recorded"
+    if radiance_digest(digests) == recorded:
+        return "matches"
+    problems.append(
+        "the radiance differs from what was written (its digest does not match the one "
+        "recorded): a chunk was altered or replaced"
+    )
+    return "differs"

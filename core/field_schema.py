@@ -7,13 +7,18 @@ the two agree on them by construction.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal, get_args
 
 __all__ = [
+    "ARRAYS",
     "BELOW_HORIZON",
+    "DIGESTED_MARK",
+    "DIGESTS_ATTRIBUTE",
     "FIELD_SCHEMA_VERSION",
     "SAMPLE_CHUNK",
+    "ArraySpec",
     "BelowHorizon",
     "companion_paths",
     "is_field_store",
@@ -39,6 +44,44 @@ FIELD_SCHEMA_VERSION = 1
 #: S = T = 30) is more than a fit's default budget. Stores written before with one chunk per
 #: slab read as they are.
 SAMPLE_CHUNK = 65536
+
+
+@dataclass(frozen=True)
+class ArraySpec:
+    """What an array of the store must be, whatever its zarr metadata says.
+
+    Attributes
+    ----------
+    shape : str, the shape as the layout names it ("(S, T, P, 3)")
+    rank : int, its number of dimensions
+    dtypes : tuple of str, the dtypes a store may hold it in (the reader widens them)
+    """
+
+    shape: str
+    rank: int
+    dtypes: tuple[str, ...]
+
+
+_FLOATS = ("float16", "float32", "float64")
+
+#: The store's arrays (the layout in :mod:`core.field_store`). A zarr.json edited to another
+#: dtype of the same width (float32 -> int32) reads the same bytes as other numbers: the
+#: reader holds every array to these before it reads one.
+ARRAYS: dict[str, ArraySpec] = {
+    "radiance": ArraySpec("(S, T, P, 3)", 4, ("float16", "float32")),
+    "visibility": ArraySpec("(S, P)", 2, ("bool",)),
+    "points": ArraySpec("(P, 3)", 2, _FLOATS),
+    "normals": ArraySpec("(P, 3)", 2, _FLOATS),
+    "light_directions": ArraySpec("(T, 3)", 2, _FLOATS),
+    "camera_directions": ArraySpec("(S, 3)", 2, _FLOATS),
+}
+
+#: The group attribute where the writer records the digest of every array and attribute
+#: (:mod:`core.field_digests`); stores written before it was recorded have none.
+DIGESTS_ATTRIBUTE = "digests"
+#: The radiance array's attribute by which a store says its writer recorded
+#: :data:`DIGESTS_ATTRIBUTE`: a store that says so and lacks the record was altered.
+DIGESTED_MARK = "digested"
 
 
 def companion_paths(store: str | os.PathLike[str]) -> list[Path]:

@@ -1,13 +1,21 @@
 """Writing a reflectance-field store: :class:`FieldStoreWriter` and its :class:`SlabWriter`.
 
 The layout written is the one :mod:`core.field_store` documents and reads (names and numbers
-in :mod:`core.field_schema`): the store is built under a temporary name, renamed when complete.
+in :mod:`core.field_schema`): the store is built under a temporary name (``.NAME.PID.partial``
+beside it), renamed when complete, and bound to digests of every array and attribute
+(:mod:`core.field_digests`).
+
+A build that is stopped (an error, Ctrl-C, SIGTERM, which ``rig`` raises as Ctrl-C) removes its
+partial store; one that is killed (SIGKILL, a power cut) cannot, and the next writer of a store
+in that folder removes the partial stores whose process is gone (:func:`remove_stale_partials`).
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import os
+import re
 import shutil
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
@@ -23,15 +31,27 @@ from core.atomic import write_problem
 from core.camera_model import PinholeCamera
 from core.errors import DatasetError, InputError
 from core.field_attributes import direction_problem
+from core.field_digests import StoreDigests, array_digest, combined_digest, metadata_digests
 from core.field_integrity import (
+    array_names,
     non_finite,
     radiance_digest,
     read_checked,
     slab_digest,
 )
-from core.field_schema import FIELD_SCHEMA_VERSION, SAMPLE_CHUNK, companion_paths, is_field_store
+from core.field_schema import (
+    DIGESTED_MARK,
+    DIGESTS_ATTRIBUTE,
+    FIELD_SCHEMA_VERSION,
+    SAMPLE_CHUNK,
+    companion_paths,
+    is_field_store,
+)
 
-__all__ = ["FieldStoreWriter", "SlabWriter"]
+__all__ = ["FieldStoreWriter", "SlabWriter", "remove_stale_partials"]
+
+#: Seconds an aborted store waits for zarr's writes already under way (a bound on a hang).
+SETTLE_S = 60.0
 
 
 class FieldStoreWriter:
@@ -41,7 +61,9 @@ class FieldStoreWriter:
     :meth:`finish`, so a crash or an error (:meth:`abort`) never leaves a half-written store
     under the real name, nor mixes new slabs into an old store. :meth:`finish` records the
     ``radiance_digest`` attribute (SHA-256 over every slab's SHA-256, in camera then light
-    order), by which a saved model fit knows the data it was fitted to.
+    order), by which a saved model fit knows the data it was fitted to, and ``digests``: the
+    digests of every array and attribute (:mod:`core.field_digests`). The partial stores of
+    writers of the same store that are gone are removed first (:attr:`removed_partials`).
 
     Parameters
     ----------
@@ -52,6 +74,11 @@ class FieldStoreWriter:
     points, normals, light_directions, cameras, image_shape, dtype, light_model, provenance :
         the field's layout (see the module docstring)
     sample_chunk : int, samples per radiance chunk (default :data:`SAMPLE_CHUNK`)
+
+    Attributes
+    ----------
+    removed_partials : list of Path, partial stores of this store left by processes that are
+        gone (killed while they wrote), removed when this writer started
 
     Raises
     ------
@@ -102,6 +129,7 @@ class FieldStoreWriter:
         self.path = Path(path)
         self.overwrite = overwrite
         _check_target(self.path, overwrite)
+        self.removed_partials = remove_stale_partials(self.path)
         self.partial = self.path.with_name(f".{self.path.name}.{os.getpid()}.partial")
         shutil.rmtree(self.partial, ignore_errors=True)
         with self._writing(any_error=True):  # a failure leaves no partial store
@@ -111,14 +139,14 @@ class FieldStoreWriter:
                 raise DatasetError(f"{path}: cannot create the field store: {error}") from error
             self._slab_digests: dict[tuple[int, int], bytes] = {}
             self._camera_peaks = np.zeros(s)
-            self._visibility_written: set[int] = set()
+            self._visibility_digests: dict[int, bytes] = {}
             # Every chunk is written, even one equal to the fill value (a black image, a camera
             # that sees nothing): a chunk that is not there is damage, never data.
             every_chunk: ArrayConfigParams = {"write_empty_chunks": True}
             self.radiance = self.group.create_array(
                 "radiance", shape=(s, t, p, 3), chunks=(1, 1, min(p, sample_chunk), 3),
                 dtype=dtype, fill_value=0.0,
-                config=every_chunk,
+                config=every_chunk, attributes={DIGESTED_MARK: True},
             )  # fmt: skip
             self.visibility = self.group.create_array(
                 "visibility", shape=(s, p), chunks=(1, p), dtype="bool", fill_value=False,
@@ -132,10 +160,12 @@ class FieldStoreWriter:
                 constants["points"] = np.asarray(points, dtype=np.float32)
             if normals is not None:
                 constants["normals"] = np.asarray(normals, dtype=np.float32)
+            self._data_digests: dict[str, str] = {}
             for name, values in constants.items():
                 self.group.create_array(
                     name, shape=values.shape, dtype=values.dtype, config=every_chunk
                 )[...] = values
+                self._data_digests[name] = array_digest(name, values)
             self.group.attrs.update(
                 {
                     "schema_version": FIELD_SCHEMA_VERSION,
@@ -194,27 +224,32 @@ class FieldStoreWriter:
         seen = np.asarray(visible, dtype=bool)
         with self._writing():
             self.visibility[camera] = seen
-        self._visibility_written.add(camera)
+        self._visibility_digests[camera] = slab_digest(seen)
         if not seen.any():
             self._camera_peaks[camera] = -1.0  # sees nothing: dark whatever its slabs hold
 
     def finish(self) -> Path:
-        """Check every slab was written, record the digest and put the store at its path.
+        """Check every slab was written, record the digests and put the store at its path.
 
         Also records ``dark_cameras``: the cameras that see nothing or recorded no light
         under any light (a lens cap, a dead cable), so the guards need not read the store.
+        Whatever stops it (an error, Ctrl-C, SIGTERM) removes the partial store; a store that
+        was at the path stays until the new one takes its place.
 
         Raises
         ------
         DatasetError
             A slab or a camera's visibility was never written (named); the partial store is
             removed.
+        InputError
+            Another process put a store at the path while this one was building it (two
+            builds of one new store: the first to finish wins); the partial store is removed.
         """
         s_count, t_count = self.radiance.shape[:2]
         missing = [f"camera {s} light {t}" for s in range(s_count) for t in range(t_count)
                    if (s, t) not in self._slab_digests]  # fmt: skip
         missing += [f"the visibility of camera {s}" for s in range(s_count)
-                    if s not in self._visibility_written]  # fmt: skip
+                    if s not in self._visibility_digests]  # fmt: skip
         if missing:
             self.abort()
             raise DatasetError(
@@ -222,22 +257,128 @@ class FieldStoreWriter:
                 f"{', ...' if len(missing) > 5 else ''}); the store was not made"
             )
         dark = [int(s) for s in np.flatnonzero(self._camera_peaks <= 0)]
-        with self._writing():
+        with self._writing(any_error=True):
             self.group.attrs["dark_cameras"] = dark
             self.group.attrs["radiance_digest"] = radiance_digest(
                 self._slab_digests[key] for key in sorted(self._slab_digests)
             )
-        _check_target(self.path, self.overwrite)
-        if self.path.exists():
-            shutil.rmtree(self.path)
-        for companion in companion_paths(self.path):
-            companion.unlink(missing_ok=True)
-        os.replace(self.partial, self.path)
+            self.group.attrs[DIGESTS_ATTRIBUTE] = self._digests().to_attribute()
+            _check_target(self.path, self.overwrite)  # a store that came meanwhile wins
+            self._put_in_place()
         return self.path
 
+    def _digests(self) -> StoreDigests:
+        """The record of the finished partial store: values given, metadata as written."""
+        data = dict(self._data_digests)
+        data["radiance"] = str(self.group.attrs["radiance_digest"])
+        data["visibility"] = combined_digest(
+            self._visibility_digests[camera] for camera in sorted(self._visibility_digests)
+        )
+        # The metadata as the files hold it, read back the way a reader will read it.
+        written = zarr.open_group(str(self.partial), mode="r")
+        attributes, metadata = metadata_digests(
+            self.partial, dict(written.attrs), array_names(self.partial)
+        )
+        return StoreDigests(data=data, metadata=metadata, attributes=attributes)
+
+    def _put_in_place(self) -> None:
+        """Rename the partial store onto the path; an old store there is set aside first.
+
+        Renaming a folder onto a folder that is not empty fails, so the old store is renamed
+        aside, the new one put in place, and the old one removed: stopped in between, the old
+        store is put back.
+        """
+        aside = self.path.with_name(f".{self.path.name}.{os.getpid()}.replaced")
+        shutil.rmtree(aside, ignore_errors=True)
+        try:
+            if self.path.exists():
+                os.replace(self.path, aside)
+            os.replace(self.partial, self.path)
+        except BaseException as error:
+            if aside.exists() and not self.path.exists():
+                os.replace(aside, self.path)
+            if isinstance(error, OSError) and self.path.exists():  # another build's came first
+                raise InputError(
+                    f"{self.path}: another process put a field store there while this one "
+                    "was building it; choose another path, or replace it (--overwrite)"
+                ) from None
+            raise
+        shutil.rmtree(aside, ignore_errors=True)
+        for companion in companion_paths(self.path):
+            companion.unlink(missing_ok=True)
+
     def abort(self) -> None:
-        """Remove the partial store; whatever was at the path stays as it was."""
+        """Remove the partial store; whatever was at the path stays as it was.
+
+        Writes already under way in zarr's event loop are waited for first: a write that Ctrl-C
+        or SIGTERM interrupted goes on in zarr's thread, and would make the folder again.
+        """
+        _settle_zarr_writes()
         shutil.rmtree(self.partial, ignore_errors=True)
+
+
+def _settle_zarr_writes() -> None:
+    """Wait (at most :data:`SETTLE_S`) for the tasks running in zarr's event loop to end."""
+    from zarr.core import sync
+
+    loop = sync.loop[0]
+    if loop is None or not loop.is_running():
+        return
+
+    async def others_done() -> None:
+        current = asyncio.current_task()
+        pending = [task for task in asyncio.all_tasks() if task is not current]
+        if pending:
+            await asyncio.wait(pending, timeout=SETTLE_S)
+
+    future = asyncio.run_coroutine_threadsafe(others_done(), loop)
+    with contextlib.suppress(Exception):  # timed out, or the loop closed meanwhile
+        future.result(timeout=SETTLE_S + 5.0)
+
+
+_PARTIAL = re.compile(r"\.(?P<name>.+)\.(?P<pid>[0-9]+)\.(?:partial|replaced)")
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (one of another user counts: it may be writing)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_partials(path: Path) -> list[Path]:
+    """Remove the partial stores of ``path`` whose writing process is gone; returns them.
+
+    A writer killed by SIGKILL (or a power cut) cannot remove its ``.NAME.PID.partial``. Only
+    those of a PID that no longer exists on this machine are removed: a process writing one
+    now keeps it. (The PID says nothing of another machine's processes: do not build one
+    store from two machines sharing a folder.) A ``.NAME.PID.replaced`` store left by a writer
+    killed between setting the old store aside and putting the new one in place is put back
+    when no store is at the path.
+    """
+    folder = path.parent if str(path.parent) else Path(".")
+    removed = []
+    try:
+        entries = list(folder.iterdir())
+    except OSError:  # the folder does not exist yet: nothing left in it
+        return []
+    for entry in sorted(entries):
+        match = _PARTIAL.fullmatch(entry.name)
+        if not (match and match["name"] == path.name and entry.is_dir()):
+            continue
+        pid = int(match["pid"])
+        if pid == os.getpid() or _alive(pid):
+            continue
+        if entry.name.endswith(".replaced") and not path.exists():
+            os.replace(entry, path)
+            continue
+        shutil.rmtree(entry, ignore_errors=True)
+        removed.append(entry)
+    return removed
 
 
 @dataclass(frozen=True)
