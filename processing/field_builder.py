@@ -43,7 +43,7 @@ from core.image_io import Transfer
 from core.progress import progress_bar
 from core.splat import CameraSplats, camera_splats, shown_points
 from processing.decode import DecodedImage, decode_image
-from processing.field_layout import CALIBRATION_KINDS, field_layout
+from processing.field_layout import CALIBRATION_KINDS, FieldLayout, field_layout
 from processing.hdr import Exposure, merge_exposures
 from processing.interpolation import interpolation_weights
 from processing.point_cloud import PointCloud
@@ -72,6 +72,8 @@ class FieldBuildReport:
     camera_indices : the dataset's camera indices of the field's cameras, in order
     left_out : files (or planned images) missing or not taken, left out (``allow_missing``)
     absent_cameras : planned camera indices with no image at all: not in the field
+    removed_partials : partial stores of the output left by builds that were killed (their
+        process gone), removed before this one began
     """
 
     path: Path
@@ -89,6 +91,7 @@ class FieldBuildReport:
     camera_indices: tuple[int, ...] = ()
     left_out: list[str] = field(default_factory=list)
     absent_cameras: list[int] = field(default_factory=list)
+    removed_partials: list[Path] = field(default_factory=list)
 
 
 def sample_view(
@@ -249,34 +252,15 @@ def build_field(
             **dict(provenance or {}),
         },
     )
-    s_count, t_count, p_count = len(layout.cameras), len(layout.light_indices), len(cloud.points)
-    # Each camera's images, by path: what a task needs of the dataset.
-    brackets: list[dict[int, list[tuple[Path, float]]]] = [{} for _ in layout.cameras]
-    darks: list[dict[float, Path]] = [{} for _ in layout.cameras]
-    for (c, t), records in layout.brackets.items():
-        brackets[c][t] = [(data.image_path(r), r.exposure_ms) for r in records]
-    for (c, exposure_ms), record in layout.darks.items():
-        darks[c][exposure_ms] = data.image_path(record)
-    # One format per capture: every file is decoded against the first one's.
-    first = next(path for camera in brackets for taken in camera.values() for path, _ in taken)
-    reference = decode_image(first, demosaic=demosaic, transfer=transfer).format
-    options = {"demosaic": demosaic, "transfer": transfer, "expected": reference}
-    scales = (radiance_scale * layout.intensities).astype(np.float32)
-    writer = store.slab_writer()
-    jobs = [CameraJob(s, pinhole, brackets[s], darks[s], layout.light_directions, scales,
-                      options, writer) for s, pinhole in enumerate(layout.cameras)]  # fmt: skip
-    counts = {"exposures": 0, "darks": 0, "without_dark": 0, "visible": 0, "saturated": 0}
+    # From here on the partial store exists: whatever stops the build (an error, Ctrl-C, or
+    # SIGTERM, which rig raises as Ctrl-C) removes it, wherever it comes.
     try:
-        for result in _built_cameras(jobs, cloud, client, progress):
-            store.write_visibility(result.camera, result.visible)
-            for t, (digest, peak) in result.slabs.items():
-                store.record_slab(result.camera, t, digest, peak)
-            for key, value in result.counts.items():
-                counts[key] += value
+        decoding = {"demosaic": demosaic, "transfer": transfer}
+        counts = _build_into(store, data, layout, cloud, client, progress, decoding, radiance_scale)
     except BaseException:
         store.abort()
         raise
-    store.finish()
+    s_count, t_count, p_count = len(layout.cameras), len(layout.light_indices), len(cloud.points)
     visible_total = max(counts["visible"], 1)
     return FieldBuildReport(
         path=Path(output),
@@ -292,7 +276,45 @@ def build_field(
         missing=list(layout.missing),
         seconds=time.perf_counter() - started,
         camera_indices=layout.camera_indices,
+        removed_partials=store.removed_partials,
     )
+
+
+def _build_into(
+    store: FieldStoreWriter,
+    data: Dataset,
+    layout: FieldLayout,
+    cloud: PointCloud,
+    client: Any,
+    progress: bool,
+    decoding: dict[str, Any],
+    radiance_scale: float,
+) -> dict[str, int]:
+    """Build every camera's slabs into ``store`` and finish it; returns the build's counts."""
+    # Each camera's images, by path: what a task needs of the dataset.
+    brackets: list[dict[int, list[tuple[Path, float]]]] = [{} for _ in layout.cameras]
+    darks: list[dict[float, Path]] = [{} for _ in layout.cameras]
+    for (c, t), records in layout.brackets.items():
+        brackets[c][t] = [(data.image_path(r), r.exposure_ms) for r in records]
+    for (c, exposure_ms), record in layout.darks.items():
+        darks[c][exposure_ms] = data.image_path(record)
+    # One format per capture: every file is decoded against the first one's.
+    first = next(path for camera in brackets for taken in camera.values() for path, _ in taken)
+    reference = decode_image(first, **decoding).format
+    options = decoding | {"expected": reference}
+    scales = (radiance_scale * layout.intensities).astype(np.float32)
+    writer = store.slab_writer()
+    jobs = [CameraJob(s, pinhole, brackets[s], darks[s], layout.light_directions, scales,
+                      options, writer) for s, pinhole in enumerate(layout.cameras)]  # fmt: skip
+    counts = {"exposures": 0, "darks": 0, "without_dark": 0, "visible": 0, "saturated": 0}
+    for result in _built_cameras(jobs, cloud, client, progress):
+        store.write_visibility(result.camera, result.visible)
+        for t, (digest, peak) in result.slabs.items():
+            store.record_slab(result.camera, t, digest, peak)
+        for key, value in result.counts.items():
+            counts[key] += value
+    store.finish()
+    return counts
 
 
 def _built_cameras(

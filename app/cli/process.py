@@ -114,6 +114,13 @@ def _run_process(args: argparse.Namespace) -> int:
         f"{report.visible_fraction:.1%}, saturated {report.saturated_fraction:.2%}, peak RSS "
         f"{peak_mb:.0f} MB -> {args.output}"
     )
+    if report.removed_partials:
+        names = [path.name for path in report.removed_partials]
+        shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+        print(
+            f"note: removed {len(names)} partial stores of {args.output.name} left by runs that "
+            f"were killed ({shown})"
+        )
     if report.left_out:
         shown = ", ".join(report.left_out[:3]) + (", ..." if len(report.left_out) > 3 else "")
         print(f"note: {len(report.left_out)} planned images left out ({shown}), interpolated")
