@@ -52,7 +52,6 @@ __all__ = [
     "SessionResult",
     "SessionState",
     "TargetPlacer",
-    "require_same_plan",
     "require_same_rig",
 ]
 
@@ -172,22 +171,6 @@ def require_same_rig(dataset: Dataset, config: RigConfig) -> None:
     )
 
 
-def require_same_plan(dataset: Dataset, plan: SweepPlan) -> None:
-    """Refuse to run a plan other than the one a dataset was made with.
-
-    Raises
-    ------
-    DatasetError
-        Naming the dataset and what to do.
-    """
-    if plan.to_dict() != dataset.plan:
-        raise DatasetError(
-            f"{dataset.path} was made with another plan than the one given: its images would "
-            "mix two plans under one index. Resume it with its own plan (rig capture --resume "
-            "DATASET), or capture this plan into a new dataset"
-        )
-
-
 class CaptureSession:
     """Run ``plan`` on ``rig`` into ``dataset``.
 
@@ -288,15 +271,19 @@ class CaptureSession:
         require_same_rig(self.dataset, self.rig.config)
 
     def _check_one_capture(self) -> None:
-        """Refuse a dataset not of one capture, or a plan other than the dataset's own.
+        """Refuse a dataset not of one capture (``capture.origin``), or another plan than its own.
 
-        A journal or manifest of another dataset would have its images taken again over the
-        files; an edited plan would be taken as done (the images are keyed by index) while its
-        poses are not the images'.
+        Another dataset's journal or manifest would have its images taken again over the files;
+        another plan would be taken as done (images are keyed by index) at other poses.
         """
         if self.dataset.origin.problems:
             raise DatasetError(self.dataset.origin.problems[0])
-        require_same_plan(self.dataset, self.plan)
+        if self.plan.to_dict() != self.dataset.plan:
+            raise DatasetError(
+                f"{self.dataset.path} was made with another plan than the one given: resume it "
+                "with its own (rig capture --resume DATASET), or capture this one into a new "
+                "dataset"
+            )
 
     def _check_journal_vouches(self) -> None:
         """Refuse a dataset whose images the journal does not vouch for.

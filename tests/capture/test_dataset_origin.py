@@ -343,3 +343,12 @@ def test_a_dataset_made_before_ids_with_another_journal_is_named(
     shutil.copyfile(theirs / "journal.jsonl", ours / "journal.jsonl")
     with pytest.raises(DatasetError, match="are of two captures"):
         Dataset.open(ours)
+
+
+def test_a_session_with_another_plan_than_the_datasets_is_refused(ours: Path) -> None:
+    other = grid_plan(2, 3, exposures_ms=(30.0,), layout="fibonacci")
+    with SimulatedRig(_config()) as simulated, simulated.rig() as rig:
+        session = CaptureSession(rig, Dataset.open(ours), other, progress=False)
+        with pytest.raises(DatasetError, match="made with another plan than the one given"):
+            session.run()
+        assert not any("G1" in line for line in simulated.gantry.lines)
