@@ -245,19 +245,25 @@ class FieldStoreWriter:
             Another process put a store at the path while this one was building it (two
             builds of one new store: the first to finish wins); the partial store is removed.
         """
+        try:
+            return self._finish()
+        except BaseException:  # Ctrl-C or SIGTERM too, wherever it comes
+            self.abort()
+            raise
+
+    def _finish(self) -> Path:
         s_count, t_count = self.radiance.shape[:2]
         missing = [f"camera {s} light {t}" for s in range(s_count) for t in range(t_count)
                    if (s, t) not in self._slab_digests]  # fmt: skip
         missing += [f"the visibility of camera {s}" for s in range(s_count)
                     if s not in self._visibility_digests]  # fmt: skip
         if missing:
-            self.abort()
             raise DatasetError(
                 f"{self.path}: {len(missing)} slabs were never written ({', '.join(missing[:5])}"
                 f"{', ...' if len(missing) > 5 else ''}); the store was not made"
             )
         dark = [int(s) for s in np.flatnonzero(self._camera_peaks <= 0)]
-        with self._writing(any_error=True):
+        with self._writing():
             self.group.attrs["dark_cameras"] = dark
             self.group.attrs["radiance_digest"] = radiance_digest(
                 self._slab_digests[key] for key in sorted(self._slab_digests)
