@@ -4,19 +4,47 @@ An environment panorama becomes K directional lights, each carrying the light of
 the panorama (radiance x solid angle, summed): the Voronoi cells of sampled directions
 (``processing.lights.disassemble_lights``) or the blocks of a pre-filter grid
 (:func:`grid_lights`). Lights of another origin (held-out measured lights) carry no cells.
+
+The lights a capture MEASURED under are checked here too (:func:`measured_lights_problem`): a
+set that no fit or relighting can use (every light in one direction, every light at or below
+the horizon of a base that blocks it) is refused where an ``.lp`` capture is imported, a field
+is opened for relighting and a fit starts.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from core.directions import panorama_directions, panorama_solid_angles
-from core.errors import InputError
+from core.directions import (
+    angle_between,
+    angles_deg_from_direction,
+    panorama_directions,
+    panorama_solid_angles,
+)
+from core.errors import DatasetError, InputError
 
-__all__ = ["LightSet", "grid_lights"]
+__all__ = [
+    "HORIZON_DEG",
+    "ONE_DIRECTION_DEG",
+    "LightSet",
+    "check_measured_lights",
+    "grid_lights",
+    "measured_lights_problem",
+]
+
+#: Measured lights all within this angle (degrees) of their mean direction are one direction.
+#: A handheld RTI capture's narrowest cone is tens of degrees wide; a light source that did not
+#: move (a wrong ``.lp`` file, a stuck gantry) repeats one direction to within its noise.
+ONE_DIRECTION_DEG = 1.0
+#: A light must rise more than this (degrees) above the horizon to light a surface lying on
+#: a base: grazing at less, it gives the surface almost nothing (cos 89 deg = 0.017) and from
+#: below the base blocks it. Real raking-light captures put some lights at 5-15 degrees, never
+#: all of them under one.
+HORIZON_DEG = 1.0
 
 
 @dataclass(frozen=True)
@@ -132,3 +160,75 @@ def grid_lights(rgb: NDArray[np.floating], grid_height: int | None = None) -> Li
     block_cols = np.searchsorted(cols, np.arange(width), side="right") - 1
     labels = (block_rows[:, None] * (2 * grid_height) + block_cols[None, :]).astype(np.int32)
     return LightSet(centroids, light, blocks(omega[:, :, None])[:, :, 0].ravel(), labels)
+
+
+def measured_lights_problem(directions: NDArray[np.floating], *, blocked_below: bool) -> str | None:
+    """Why a capture's measured lights cannot be fitted or relit, or None when they can.
+
+    Only what truly cannot work is named (the thresholds are far from any real capture):
+
+    - every light within :data:`ONE_DIRECTION_DEG` of one direction (two lights or more): a
+      sample's answer to any other light is unknown;
+    - with ``blocked_below`` (the base hides what lies below the horizon), every light at
+      most :data:`HORIZON_DEG` above the horizon (rig z = 0): no light reaches the object.
+
+    Narrow sets that still answer something pass: a single ring of lights (one elevation; a
+    PTM's constant and squared terms share it), a handheld capture's small cone, lights along
+    one arc (a single view's normals across the arc's plane are undetermined, yet
+    interpolation among the lights and the least-squares fits still relight along it).
+
+    Parameters
+    ----------
+    directions : ndarray, shape (T, 3)
+        Unit vectors toward the lights, rig frame (z up: the horizon is z = 0).
+    blocked_below : bool, the base blocks the light from below the horizon
+
+    Returns
+    -------
+    str or None
+        The problem in words (the light count, the direction or the highest light, what is
+        needed).
+    """
+    lights = np.asarray(directions, dtype=np.float64)
+    count = int(lights.shape[0])
+    if lights.ndim != 2 or lights.shape[1] != 3 or count < 2 or not np.isfinite(lights).all():
+        return None  # shapes, a single light and NaN are refused by their own checks
+    lights = lights / np.linalg.norm(lights, axis=1, keepdims=True)
+    mean = lights.sum(axis=0)
+    if np.linalg.norm(mean) > 0.5 * count:  # opposite lights have no mean direction
+        widest = float(np.rad2deg(angle_between(lights, mean).max()))
+        if widest <= ONE_DIRECTION_DEG:
+            azimuth, inclination = angles_deg_from_direction(mean)
+            return (
+                f"all {count} lights are within {ONE_DIRECTION_DEG:g} degree of one direction "
+                f"(azimuth {float(azimuth):.1f}, inclination {float(inclination):.1f} deg; the "
+                f"farthest {widest:.2f} deg from it): a relightable fit needs lights spread "
+                "over the dome"
+            )
+    highest = float(np.rad2deg(np.arcsin(np.clip(lights[:, 2].max(), -1.0, 1.0))))
+    if blocked_below and highest <= HORIZON_DEG:
+        return (
+            f"every one of the {count} lights is at or below the horizon (elevation <= 0; the "
+            f"highest at {round(highest, 1) + 0.0:.1f} deg): the base blocks the light from below "
+            "(below_horizon 'blocked'), so none reaches the object; capture lights above the "
+            "horizon, or state --below-horizon open if nothing blocks the light from below"
+        )
+    return None
+
+
+def check_measured_lights(
+    where: str | os.PathLike[str],
+    directions: NDArray[np.floating],
+    *,
+    blocked_below: bool,
+) -> None:
+    """:func:`measured_lights_problem` as a DatasetError naming ``where`` (a file, a store).
+
+    Raises
+    ------
+    DatasetError
+        The lights cannot be fitted or relit (one direction, none above a blocking horizon).
+    """
+    problem = measured_lights_problem(directions, blocked_below=blocked_below)
+    if problem is not None:
+        raise DatasetError(f"{os.fspath(where)}: {problem}")

@@ -38,6 +38,7 @@ from core.camera_model import PinholeCamera, camera_to_rig, rig_to_camera
 from core.errors import DatasetError, InputError
 from core.field_store import BELOW_HORIZON, BelowHorizon, FieldStoreWriter, ReflectanceField
 from core.image_io import PixelDepth, TransferChoice
+from core.light_set import check_measured_lights
 from core.lp_format import LightPositions, read_lp, write_lp
 from core.progress import progress_bar
 from processing.rti_files import (
@@ -153,7 +154,8 @@ def import_rti(
         :func:`read_intensity_sidecar`), intensities in both; a missing, unreadable or
         non-finite image, images of different sizes or bit depths (the first that differs
         named with its ``.lp`` line); a mask that cannot be read, is not the images' size or
-        selects no pixel.
+        selects no pixel; lights nothing can use (:func:`core.light_set.check_measured_lights`:
+        all in one direction, none above a blocking horizon).
     InputError
         A bad ``dtype`` or ``transfer``, or an output path that exists and is not a field store
         (or is one, without ``overwrite``).
@@ -180,6 +182,9 @@ def import_rti(
             f"below the horizon must be one of {', '.join(BELOW_HORIZON)}, got {below_horizon!r}"
         )
     lights = read_lp(lp_file)
+    # Refused before any image is read: degenerate lights would be imported, then fitted.
+    # The camera straight above the object: a light's camera z is its rig z (its elevation).
+    check_measured_lights(lp_file, lights.directions, blocked_below=below_horizon == "blocked")
     folder = lp_file.parent
     paths = [_image_path(folder, name) for name in lights.files]
     for index, path in enumerate(paths):
@@ -390,7 +395,8 @@ def open_field_or_rti(
     ------
     DatasetError
         A folder that is neither a store nor holds one ``.lp`` file; what
-        :meth:`ReflectanceField.open` and :func:`import_rti` refuse.
+        :meth:`ReflectanceField.open` and :func:`import_rti` refuse; a store whose lights no
+        fit or relighting can use (:func:`core.light_set.check_measured_lights`).
     InputError
         ``transfer`` other than ``"auto"``, or a ``mask``, given for a field store.
     """
@@ -408,7 +414,12 @@ def open_field_or_rti(
                 "imported; a field store keeps the ones it was made with"
             )
         opened = ReflectanceField.open(where)
-        yield opened if below_horizon is None else opened.stating(below_horizon=below_horizon)
+        if below_horizon is not None:
+            opened = opened.stating(below_horizon=below_horizon)
+        check_measured_lights(
+            where, opened.light_directions, blocked_below=opened.below_horizon == "blocked"
+        )
+        yield opened
         return
     with tempfile.TemporaryDirectory(prefix="rig-rti-") as scratch:
         yield import_rti(

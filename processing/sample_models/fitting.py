@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from core.camera_model import rig_to_camera
 from core.errors import DatasetError, InputError
 from core.field_store import ReflectanceField, is_field_store
+from core.light_set import check_measured_lights
 from core.memory_budget import default_memory_budget, format_size
 from core.progress import progress_bar
 from processing.sample_models.bases import evaluate_basis, fit_basis
@@ -117,7 +118,8 @@ def fit_sample_models(
     InputError
         An unknown model, a basis model for a point field, bad ranges, too few lights.
     DatasetError
-        A point field without normals.
+        A point field without normals; lights no fit can use
+        (:func:`core.light_set.check_measured_lights`).
     """
     layout, blocks = fit_blocks(
         field, models, alpha_range=alpha_range, shadow_ratio=shadow_ratio,
@@ -174,6 +176,8 @@ def fit_blocks(
     lights = np.ascontiguousarray(field.light_directions, dtype=np.float64)
     frame, view, eyes, points = _viewing(field)
     pixels = field.sample_kind == "pixels"
+    # pinv would fit degenerate lights without a word (and a choice run minutes on them).
+    check_measured_lights(field.path, lights, blocked_below=field.below_horizon == "blocked")
     camera_lights = lights @ frame.T
     terms = {name: evaluate_basis(name, camera_lights[:1]).shape[1] for name in BASIS_MODELS}
     for name in names:
