@@ -1,16 +1,24 @@
 """``rig sample``: importance-sample a panorama into K lights and write their pictures.
 
 Application layer: parses the lighting controls and calls
-:func:`render.lighting_outputs.write_lighting_outputs`.
+:func:`render.lighting_outputs.write_lighting_outputs` into a hidden folder beside the output,
+whose files are moved in only once all three are written: a full disk (or any failure) leaves
+the output as it was, not a new folder holding ``lights.json`` without its pictures.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from app.cli.args import count, finite, output_directory, positive, whole
 from app.cli.choices import SAMPLERS
+from core.errors import InputError
 
 
 def add_sample(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -61,7 +69,8 @@ def _run_sample(args: argparse.Namespace) -> int:
         yaw_deg=args.yaw,
         exposure=args.exposure,
     )
-    lighting = write_lighting_outputs(panorama, controls, args.output, progress=True)
+    with _whole_folder(args.output) as folder:
+        lighting = write_lighting_outputs(panorama, controls, folder, progress=True)
     lights = lighting.light_set()
     print(
         f"{lights.k} lights ({controls.method}) from {panorama.source} "
@@ -69,3 +78,58 @@ def _run_sample(args: argparse.Namespace) -> int:
         f"{lights.rgb.sum(axis=0).round(4).tolist()} (RGB radiance x sr) -> {args.output}/"
     )
     return 0
+
+
+@contextmanager
+def _whole_folder(output: Path) -> Iterator[Path]:
+    """A hidden folder beside ``output`` to write into; its files join ``output`` on success.
+
+    A new ``output`` is the hidden folder renamed; an existing one receives the files one
+    rename each (no new bytes: a rename cannot fail for space). On any failure the hidden
+    folder, and the parents made for it, are removed; an error naming a file in the hidden
+    folder is said of the same file in ``output``.
+    """
+    made = _missing_parents(output)
+    try:
+        output.parent.mkdir(parents=True, exist_ok=True)
+        partial = Path(tempfile.mkdtemp(prefix=f".{output.name}.", suffix=".partial",
+                                        dir=output.parent))  # fmt: skip
+    except OSError as error:
+        _remove_empty(made)
+        raise InputError(f"{output}: cannot create the folder: {error.strerror or error}") from None
+    try:
+        try:
+            yield partial
+            _move_in(partial, output)
+        except InputError as error:
+            raise InputError(str(error).replace(str(partial), str(output))) from None
+        except OSError as error:
+            raise InputError(f"{output}: cannot write: {error.strerror or error}") from None
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)
+        _remove_empty(made)
+        raise
+
+
+def _move_in(partial: Path, output: Path) -> None:
+    """The files of ``partial`` into ``output`` (``partial`` itself when there is none)."""
+    if not output.exists():
+        os.replace(partial, output)
+        return
+    for file in sorted(partial.iterdir()):
+        os.replace(file, output / file.name)
+    partial.rmdir()
+
+
+def _missing_parents(output: Path) -> list[Path]:
+    """The parents of ``output`` that do not exist yet, deepest first."""
+    return [parent for parent in output.parents if not parent.exists()]
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove ``folders`` (deepest first) made for a write that failed, if still empty."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except OSError:
+            return
