@@ -50,6 +50,7 @@ __all__ = [
     "is_marked",
     "metadata_digests",
     "read_record",
+    "require_bound",
     "slab_digest",
     "unbound_note",
 ]
@@ -278,6 +279,28 @@ def binding_problems(
                 "match): the array was altered, or its chunks swapped or replaced"
             )
     return problems
+
+
+def require_bound(
+    where: Path,
+    attrs: Mapping[str, Any],
+    names: Iterable[str],
+    values: Mapping[str, NDArray[Any] | None],
+) -> None:
+    """Raise when :func:`binding_problems` finds any (``values`` None: an array the store lacks).
+
+    Raises
+    ------
+    DatasetError
+        Naming the store and the first three problems, and what to do.
+    """
+    read = {name: array for name, array in values.items() if array is not None}
+    problems = binding_problems(where, attrs, names, read)
+    if problems:
+        listed = "; ".join(problems[:3]) + ("; ..." if len(problems) > 3 else "")
+        raise DatasetError(
+            f"{where}: the store was altered after it was written: {listed}; {REBUILD}"
+        )
 
 
 def unbound_note(attrs: Mapping[str, Any], names: Iterable[str], root: Path) -> str | None:

@@ -54,6 +54,7 @@ __all__ = [
     "missing_chunks",
     "non_finite",
     "open_array",
+    "open_arrays",
     "radiance_digest",
     "read_checked",
     "require_complete",
@@ -156,6 +157,14 @@ def open_array(root: Path, group: Any, name: str) -> Any:
         f"{root}: array {name!r} ({name}/zarr.json): {problem}: its metadata was altered; "
         f"{REBUILD}"
     )
+
+
+def open_arrays(root: Path, group: Any, names: Iterable[str]) -> dict[str, Any]:
+    """The arrays ``names`` (:func:`open_array`), each with all its chunks (or DatasetError)."""
+    arrays = {name: open_array(root, group, name) for name in sorted(names)}
+    for array in arrays.values():
+        require_complete(root, array)
+    return arrays
 
 
 def _chunk_grid(array: Any) -> list[int]:

@@ -25,10 +25,10 @@ view in row-major order, P = h w, as RTI data), ``cameras`` (one dict per camera
 inclination_deg, distance, fov_deg, width, height), ``light_model`` ("directional" or "point"
 with its distance; ``below_horizon``: what the capture states of the environment below the
 rig's horizon, see :data:`BELOW_HORIZON`), ``provenance`` (free-form dict: scene, tool,
-creation time...), ``radiance_digest`` and ``dark_cameras`` (recorded by the writer), and
-``digests``: the digests of every array's values and metadata and of every other attribute,
-by which opening a store refuses one altered since it was written (the radiance's values are
-checked by ``rig verify``; :mod:`core.field_digests`, ``docs/field-store.md``).
+creation time...), ``radiance_digest``, ``dark_cameras`` and ``digests``, which bind every
+array and attribute to what was written: opening compares all but the radiance's values (read
+on demand; ``rig verify`` checks them) with them (:mod:`core.field_digests`,
+``docs/field-store.md``).
 """
 
 from __future__ import annotations
@@ -47,14 +47,8 @@ from numpy.typing import NDArray
 from core.camera_model import PinholeCamera
 from core.errors import DatasetError, InputError
 from core.field_attributes import check_directions, read_attributes
-from core.field_digests import REBUILD, binding_problems, read_record
-from core.field_integrity import (
-    array_names,
-    non_finite,
-    open_array,
-    read_checked,
-    require_complete,
-)
+from core.field_digests import require_bound
+from core.field_integrity import array_names, non_finite, open_arrays, read_checked
 from core.field_schema import (
     BELOW_HORIZON,
     FIELD_SCHEMA_VERSION,
@@ -111,8 +105,6 @@ class ReflectanceField:
         stores written before it was recorded, and for in-memory subsets)
     dark_cameras : tuple of int or None, the cameras the writer found to record no light
         (None when not recorded: older stores, in-memory subsets)
-    digested : bool, the store's arrays and attributes were found as its writer's digests
-        recorded them (False: a store written before they were, or an in-memory subset)
     """
 
     path: Path
@@ -128,7 +120,6 @@ class ReflectanceField:
     radiance: Any = field(repr=False)  # the zarr array (S, T, P, 3), read on demand
     radiance_digest: str | None = None
     dark_cameras: tuple[int, ...] | None = None
-    digested: bool = False
     cached_slabs: int = CACHED_SLABS
     _slabs: OrderedDict[int, NDArray[np.float32]] = field(default_factory=OrderedDict, repr=False)
 
@@ -136,14 +127,7 @@ class ReflectanceField:
     def open(
         cls, path: str | os.PathLike[str], cached_slabs: int = CACHED_SLABS
     ) -> ReflectanceField:
-        """Open the store at ``path``; DatasetError names what is missing or inconsistent.
-
-        Every array's metadata is held to the layout, the attributes to their types, the
-        directions to unit vectors, and then every array but the radiance (read whole here)
-        and every attribute to the digests the writer recorded: a store altered since it was
-        written is refused, naming what differs. The radiance's values are read on demand;
-        ``rig verify`` checks them against their digest.
-        """
+        """Open the store at ``path``; DatasetError names what is missing, altered or wrong."""
         where = Path(path)
         if not where.exists():
             raise DatasetError(f"{where}: no such field store")
@@ -162,9 +146,7 @@ class ReflectanceField:
         for required in ("radiance", "visibility", "light_directions", "camera_directions"):
             if required not in names:
                 raise DatasetError(f"{where}: the field store has no {required!r} array")
-        arrays = {name: open_array(where, group, name) for name in sorted(names)}
-        for array in arrays.values():
-            require_complete(where, array)
+        arrays = open_arrays(where, group, names)
         radiance = arrays["radiance"]
         if len(radiance.shape) != 4 or radiance.shape[3] != 3:
             raise DatasetError(f"{where}: radiance must be (S, T, P, 3), got {radiance.shape}")
@@ -197,16 +179,9 @@ class ReflectanceField:
                     f"{where}: {name} {row} is {values[row].tolist()}, not finite: rebuild the "
                     "store from its source"
                 )
-        read_values = {"light_directions": light_directions,
+        read_values = {"light_directions": light_directions, "points": points, "normals": normals,
                        "camera_directions": camera_directions, "visibility": visibility}
-        read_values |= {name: values for name, values in (("points", points),
-                        ("normals", normals)) if values is not None}  # fmt: skip
-        problems = binding_problems(where, attrs, names, read_values)
-        if problems:
-            listed = "; ".join(problems[:3]) + ("; ..." if len(problems) > 3 else "")
-            raise DatasetError(
-                f"{where}: the store was altered after it was written: {listed}; {REBUILD}"
-            )
+        require_bound(where, attrs, names, read_values)
         return cls(
             path=where,
             light_directions=light_directions.astype(np.float64),
@@ -221,7 +196,6 @@ class ReflectanceField:
             radiance=radiance,
             radiance_digest=checked.radiance_digest,
             dark_cameras=checked.dark_cameras,
-            digested=read_record(where, attrs) is not None,
             cached_slabs=cached_slabs,
         )
 
