@@ -304,12 +304,14 @@ def _check_same_field(source: Path, data: dict[str, NDArray[Any]], field: Reflec
             "differ); delete the file to fit again"
         )
     # The geometry alone cannot tell two scenes of one layout apart: the data's digest can.
+    # A fit that names a digest came from a store that had one: a store without one (written
+    # before digests were recorded) is another field.
     saved = str(data.get("field_radiance_digest", ""))
-    if field.radiance_digest and saved != field.radiance_digest:
+    if saved != (field.radiance_digest or ""):
         raise StaleFitError(
             f"{source} was fitted to other data than {field.path} holds now (its radiance "
-            f"digest {saved[:12] or 'is missing'}, the store's {field.radiance_digest[:12]}); "
-            "delete the file to fit again"
+            f"digest {saved[:12] or 'is missing'}, the store's "
+            f"{(field.radiance_digest or '')[:12] or 'is missing'}); delete the file to fit again"
         )
 
 

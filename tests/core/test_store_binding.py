@@ -224,3 +224,19 @@ def test_stale_partials_of_gone_processes_are_removed(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         ".f.zarr.1.partial", f".other.zarr.{gone}.partial",
     ]  # fmt: skip
+
+
+def test_a_store_older_than_digests_refuses_a_fit_that_names_one(
+    store: Path, written: dict[str, Path], tmp_path: Path
+) -> None:
+    from processing.sample_model_store import StaleFitError, models_for_field
+
+    other_fit = tmp_path / "other.npz"
+    models_for_field(ReflectanceField.open(written["diffuse"]), other_fit)
+    # As stores were written before any digest: no radiance digest, no record, no mark.
+    _drop_attributes(store, "radiance_digest", "digests")
+    _edit_json(store / "radiance" / "zarr.json", lambda m: m.update(attributes={}))
+    field = ReflectanceField.open(store)
+    assert field.radiance_digest is None
+    with pytest.raises(StaleFitError, match="the store's is missing"):
+        models_for_field(field, other_fit)
