@@ -33,6 +33,7 @@ __all__ = [
     "angles_from_direction",
     "direction_from_angles",
     "direction_from_angles_deg",
+    "farthest_point_order",
     "fibonacci_sphere",
     "hemisphere_layout",
     "normalize",
@@ -47,6 +48,7 @@ __all__ = [
     "panorama_solid_angles",
     "rotate_directions_yaw",
     "rotate_panorama_yaw",
+    "spread_partition",
 ]
 
 
@@ -257,6 +259,70 @@ def rotate_panorama_yaw(image: NDArray[np.floating], yaw_deg: float) -> NDArray[
         return base
     following = np.roll(base, -1, axis=1)
     return ((1.0 - frac) * base + frac * following).astype(image.dtype, copy=False)
+
+
+def farthest_point_order(directions: ArrayLike, *, seed: int = 0) -> NDArray[np.int64]:
+    """The N directions (N, 3) in farthest-point order: indices (N,) int64.
+
+    The first is drawn with ``seed``; each next one is the farthest from those before it, so
+    any prefix of the order is spread over the set.
+    """
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    if not len(d):
+        return np.zeros(0, dtype=np.int64)
+    first = int(np.random.default_rng(seed).integers(len(d)))
+    order = [first]
+    distance = np.linalg.norm(d - d[first], axis=1)
+    distance[first] = -1.0
+    for _ in range(len(d) - 1):
+        nxt = int(np.argmax(distance))
+        order.append(nxt)
+        distance = np.minimum(distance, np.linalg.norm(d - d[nxt], axis=1))
+        distance[order] = -1.0
+    return np.asarray(order, dtype=np.int64)
+
+
+#: Seeds :func:`spread_partition` tries.
+PARTITION_TRIES = 8
+
+
+def spread_partition(directions: ArrayLike, count: int, *, seed: int = 0) -> NDArray[np.int64]:
+    """Each of N directions (N, 3) dealt into one of ``count`` groups, each group spread: (N,).
+
+    Directions are taken in farthest-point order (:func:`farthest_point_order`) and each goes
+    to the group, among those not yet full (sizes differ by at most one), whose nearest member
+    is farthest from it: a group's members are rarely each other's neighbours, so holding a
+    group out leaves gaps of about the set's own spacing. Of the orders started by
+    :data:`PARTITION_TRIES` seeds from ``seed``, the partition whose closest pair within a
+    group is farthest apart is kept.
+    """
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    if count < 1:
+        raise InputError(f"a partition needs 1 group or more, got {count}")
+    best, closest = np.zeros(len(d), dtype=np.int64), -1.0
+    for start in range(seed, seed + PARTITION_TRIES):
+        group, pair = _partition(d, count, start)
+        if pair > closest:
+            best, closest = group, pair
+    return best
+
+
+def _partition(d: FloatArray, count: int, seed: int) -> tuple[NDArray[np.int64], float]:
+    """One greedy partition (:func:`spread_partition`) and its closest pair within a group."""
+    group = np.full(len(d), -1, dtype=np.int64)
+    nearest = np.full((count, len(d)), np.inf)  # each group's distance to each direction
+    size = np.zeros(count, dtype=np.int64)
+    full = -(-len(d) // count)
+    pair = math.inf
+    for index in farthest_point_order(d, seed=seed):
+        score = np.where(size < full, nearest[:, index], -np.inf)
+        best = np.flatnonzero(score == score.max())
+        g = int(best[np.argmin(size[best])])
+        group[index] = g
+        size[g] += 1
+        pair = min(pair, float(nearest[g, index]))
+        nearest[g] = np.minimum(nearest[g], np.linalg.norm(d - d[index], axis=1))
+    return group, pair
 
 
 #: Azimuth step of the spherical Fibonacci lattice, radians (the golden angle).

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from core.directions import farthest_point_order
 from core.errors import InputError
 from processing.learned_rti import _encoder_input
 
@@ -51,14 +52,7 @@ def validation_lights(
     count = min(len(d) - 2, max(1, round(share * len(d)))) if share > 0 else 0
     if count <= 0:
         return np.zeros(0, dtype=np.int64)
-    first = int(np.random.default_rng(seed).integers(len(d)))
-    chosen = [first]
-    distance = np.linalg.norm(d - d[first], axis=1)
-    while len(chosen) < count:
-        nxt = int(np.argmax(distance))
-        chosen.append(nxt)
-        distance = np.minimum(distance, np.linalg.norm(d - d[nxt], axis=1))
-    return np.sort(np.asarray(chosen, dtype=np.int64))
+    return np.sort(farthest_point_order(d, seed=seed)[:count])
 
 
 def idle_cores() -> int:

@@ -18,10 +18,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.camera_model import rig_to_camera
+from core.directions import spread_partition
 from core.errors import InputError
 from core.field_store import ReflectanceField
 
-__all__ = ["RING_GAP_DEG", "SPLITS", "lowest_lights", "ring_groups", "split_lights"]
+__all__ = [
+    "RING_GAP_DEG",
+    "SPLITS",
+    "lowest_lights",
+    "ring_groups",
+    "split_lights",
+    "spread_groups",
+]
 
 #: Ways :func:`split_lights` splits one capture.
 SPLITS = ("every-other", "rings", "random")
@@ -57,6 +65,18 @@ def lowest_lights(field: ReflectanceField) -> NDArray[np.int64]:
     count = max(3, len(order) // 6)
     edge = inclination[order[count - 1]]
     return np.sort(np.flatnonzero(inclination > edge - RING_GAP_DEG)).astype(np.int64)
+
+
+def spread_groups(field: ReflectanceField, count: int) -> NDArray[np.int64]:
+    """Each light's group (T,) of ``count`` groups, every group spread over the dome.
+
+    :func:`core.directions.spread_partition`: holding one group out leaves gaps of about the
+    dome's own spacing while the rest keeps ``1 - 1/count`` of the lights, close to the
+    density the capture's use has.
+    """
+    if count < 2:
+        raise InputError(f"spread groups need a count of 2 or more, got {count}")
+    return spread_partition(field.light_directions, count)
 
 
 def split_lights(field: ReflectanceField, how: str) -> tuple[NDArray[np.int64], NDArray[np.int64]]:

@@ -11,6 +11,8 @@ from core.directions import (
     angle_between,
     angles_deg_from_direction,
     direction_from_angles_deg,
+    farthest_point_order,
+    hemisphere_layout,
     normalize,
     panorama_directions,
     panorama_pixel_from_direction,
@@ -19,6 +21,7 @@ from core.directions import (
     panorama_solid_angles,
     rotate_directions_yaw,
     rotate_panorama_yaw,
+    spread_partition,
 )
 from core.errors import InputError
 
@@ -130,3 +133,30 @@ def test_the_numba_cell_is_the_panorama_mapping_turned_back_by_the_yaw() -> None
         assert r0 + fr == pytest.approx(clamped, abs=1e-9)
         offset = (c0 + fc - c) % width  # the same column, whichever side of the wrap
         assert min(offset, width - offset) < 1e-9
+
+
+def test_the_farthest_point_order_spreads_every_prefix() -> None:
+    lights = hemisphere_layout(49, "fibonacci")
+    order = farthest_point_order(lights, seed=3)
+    assert order.dtype == np.int64 and sorted(order.tolist()) == list(range(49))
+    distance = np.linalg.norm(lights[:, None] - lights[None], axis=2)
+    np.fill_diagonal(distance, np.inf)
+    spacing = float(np.median(distance.min(axis=1)))
+    assert distance[np.ix_(order[:8], order[:8])].min() > 2.0 * spacing
+    # repeated directions are still each taken once
+    assert sorted(farthest_point_order(np.tile(lights[:3], (3, 1))).tolist()) == list(range(9))
+    assert farthest_point_order(np.zeros((0, 3))).size == 0
+
+
+@pytest.mark.parametrize("count", [12, 36, 49, 60, 100])
+def test_a_spread_partition_keeps_each_group_apart_and_the_groups_even(count: int) -> None:
+    lights = hemisphere_layout(count, "fibonacci")
+    group = spread_partition(lights, 4)
+    distance = np.linalg.norm(lights[:, None] - lights[None], axis=2)
+    np.fill_diagonal(distance, np.inf)
+    spacing = float(np.median(distance.min(axis=1)))
+    sizes = np.bincount(group, minlength=4)
+    assert sizes.sum() == count and sizes.max() - sizes.min() <= 1
+    # each member's nearest fellow is about twice the spacing away (a random deal: 1.2-1.5)
+    fellows = [distance[np.ix_(group == g, group == g)].min(axis=1) for g in range(4)]
+    assert np.mean(np.concatenate(fellows)) > 1.5 * spacing
