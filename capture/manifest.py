@@ -114,15 +114,7 @@ def check_relative(path: object) -> str:
 def check_image_file(path: object) -> str:
     """Refuse a record's file path that is not a portable image name under ``images/``.
 
-    Parameters
-    ----------
-    path : object
-        The candidate path, dataset-relative.
-
-    Returns
-    -------
-    str
-        ``path`` unchanged.
+    Takes ``path`` and returns it unchanged as :func:`check_relative` does.
 
     Raises
     ------
