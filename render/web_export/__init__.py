@@ -18,6 +18,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+# The same names as export.py imports, on purpose: this is the package's face re-exporting
+# them, their one home is names.py (duplicates lists the pair; it restates no logic).
 from render.web_export.names import (
     BASIS_MODELS,
     ERROR_SAMPLES,
