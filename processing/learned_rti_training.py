@@ -55,6 +55,7 @@ from processing.learned_rti import (
 )
 from processing.network_training import (
     Device,
+    check_settings,
     idle_cores,
     numpy_layers,
     principal_codes,
@@ -126,34 +127,26 @@ class TrainingSettings:
     device: Device = "auto"
 
     def __post_init__(self) -> None:
-        for name in (
-            "steps",
-            "batch",
-            "max_samples",
-            "epochs",
-            "patience",
-            "code_size",
-            "encoder_width",
-            "decoder_width",
-            "decoder_layers",
-        ):
-            if getattr(self, name) < 1:
-                raise InputError(f"learned model: {name} must be at least 1")
-        for name in ("lights_per_step", "threads"):
-            value = getattr(self, name)
-            if value is not None and value < 1:
-                raise InputError(f"learned model: {name} must be at least 1 (or None)")
-        if self.light_frequencies < 0:
-            raise InputError("learned model: light_frequencies must be 0 or more")
-        if not self.rate > 0 or not self.max_seconds > 0:
-            raise InputError("learned model: rate and max_seconds must be positive")
-        if not 0.0 <= self.validation < 0.5:
-            raise InputError(
-                f"learned model: validation is the share of lights held out, in [0, 0.5); "
-                f"got {self.validation}"
-            )
-        if self.device not in ("auto", "cpu", "cuda"):
-            raise InputError(f"learned model: device must be auto, cpu or cuda, not {self.device}")
+        check_settings(
+            self,
+            model="learned",
+            counts=(
+                "steps",
+                "batch",
+                "max_samples",
+                "epochs",
+                "patience",
+                "code_size",
+                "encoder_width",
+                "decoder_width",
+                "decoder_layers",
+            ),
+            share="validation",
+            also=(
+                (self.light_frequencies >= 0, "light_frequencies must be 0 or more"),
+                (self.rate > 0 and self.max_seconds > 0, "rate and max_seconds must be positive"),
+            ),
+        )
 
 
 def train_learned_rti(

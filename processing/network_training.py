@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import os
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +27,7 @@ if TYPE_CHECKING:  # imported when training: relighting never needs it
 
 __all__ = [
     "Device",
+    "check_settings",
     "idle_cores",
     "numpy_layers",
     "principal_codes",
@@ -37,6 +38,61 @@ __all__ = [
 
 #: Where a network is trained: "auto" (CUDA when available), "cpu" or "cuda".
 Device = Literal["auto", "cpu", "cuda"]
+
+
+class _Settings(Protocol):
+    """What both settings classes hold that :func:`check_settings` reads by name."""
+
+    @property
+    def lights_per_step(self) -> int | None: ...
+    @property
+    def threads(self) -> int | None: ...
+    @property
+    def device(self) -> str: ...
+
+
+def check_settings(
+    settings: _Settings,
+    *,
+    model: str,
+    counts: tuple[str, ...],
+    share: str,
+    also: tuple[tuple[bool, str], ...] = (),
+) -> None:
+    """Refuse a network's training settings that no training could run (InputError).
+
+    Both settings classes carry whole counts, ``lights_per_step`` and ``threads`` (a count or
+    None), a share of lights held out and a device; ``also`` holds each class's own checks
+    as (holds, message) pairs, tried between the counts and the share so that the first
+    fault reported is the one each class reported before the checks were shared.
+
+    Parameters
+    ----------
+    settings : the frozen settings (read by attribute name)
+    model : the model's name in the messages ("learned", "neural")
+    counts : attributes that must be at least 1
+    share : the attribute holding the share of lights held out, in [0, 0.5)
+    also : (holds, message) pairs: the first that does not hold is refused with its message
+    """
+    for name in counts:
+        if getattr(settings, name) < 1:
+            raise InputError(f"{model} model: {name} must be at least 1")
+    for name, value in (
+        ("lights_per_step", settings.lights_per_step),
+        ("threads", settings.threads),
+    ):
+        if value is not None and value < 1:
+            raise InputError(f"{model} model: {name} must be at least 1 (or None)")
+    for holds, message in also:
+        if not holds:
+            raise InputError(f"{model} model: {message}")
+    held_out = getattr(settings, share)
+    if not 0.0 <= held_out < 0.5:
+        raise InputError(
+            f"{model} model: {share} is the share of lights held out, in [0, 0.5); got {held_out}"
+        )
+    if settings.device not in ("auto", "cpu", "cuda"):
+        raise InputError(f"{model} model: device must be auto, cpu or cuda, not {settings.device}")
 
 
 def validation_lights(

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from core.errors import InputError
 from processing.network_training import (
     Device,
+    check_settings,
     idle_cores,
     numpy_layers,
     principal_codes,
@@ -96,24 +97,22 @@ class NeuralSettings:
     device: Device = "auto"
 
     def __post_init__(self) -> None:
-        for name in ("hidden", "steps", "batch", "encoder_width"):
-            if getattr(self, name) < 1:
-                raise InputError(f"neural model: {name} must be at least 1")
-        for name in ("lights_per_step", "threads"):
-            value = getattr(self, name)
-            if value is not None and value < 1:
-                raise InputError(f"neural model: {name} must be at least 1 (or None)")
-        if not (math.isfinite(self.max_seconds) and self.max_seconds > 0):
-            raise InputError(f"neural model: time budget {self.max_seconds} s must be positive")
-        if not (self.rate > 0 and self.code_rate > 0 and self.encoder_rate > 0):
-            raise InputError("neural model: the learning rates must be positive")
-        if not 0.0 <= self.holdout < 0.5:
-            raise InputError(
-                f"neural model: holdout is the share of lights held out, in [0, 0.5); "
-                f"got {self.holdout}"
-            )
-        if self.device not in ("auto", "cpu", "cuda"):
-            raise InputError(f"neural model: device must be auto, cpu or cuda, not {self.device}")
+        check_settings(
+            self,
+            model="neural",
+            counts=("hidden", "steps", "batch", "encoder_width"),
+            share="holdout",
+            also=(
+                (
+                    math.isfinite(self.max_seconds) and self.max_seconds > 0,
+                    f"time budget {self.max_seconds} s must be positive",
+                ),
+                (
+                    self.rate > 0 and self.code_rate > 0 and self.encoder_rate > 0,
+                    "the learning rates must be positive",
+                ),
+            ),
+        )
 
 
 def _checked(levels: NDArray[np.integer], lights: NDArray[np.floating]) -> NDArray[np.float32]:
