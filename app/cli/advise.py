@@ -53,10 +53,16 @@ def run_advisor(
     Also returns the field's camera and light counts.
     """
     from core.field_store import ReflectanceField
+    from core.light_set import check_measured_lights
     from processing.panorama import read_panorama
     from render.advisor import Advisor
 
     field = ReflectanceField.open(field_path)
+    # Refused before the hold-out fits, as every other opener of a store refuses it: they
+    # failed inside a fold, naming a subset or no file ("measured directions 0 and 1 coincide").
+    check_measured_lights(
+        field_path, field.light_directions, blocked_below=field.below_horizon == "blocked"
+    )
     panorama = read_panorama(env)
     if panorama.note:
         print(panorama.note)

@@ -66,6 +66,7 @@ def add_batch(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
 def _run_batch(args: argparse.Namespace) -> int:
     from core.camera_model import PinholeCamera
     from core.field_store import ReflectanceField
+    from core.light_set import check_measured_lights
     from processing.panorama import read_panorama
     from processing.sample_model_store import default_models_path, models_for_field
     from render.batch import BatchPlan, read_batch_frames, relight_batch
@@ -77,6 +78,12 @@ def _run_batch(args: argparse.Namespace) -> int:
     if args.gif:  # checked before the work, as the store is
         _check_gif_folder(args.output.with_suffix(""), args.env)
     field = ReflectanceField.open(args.field)
+    # Refused here as every other opener of a store refuses it (processing.rti's
+    # open_field_or_rti): before, --paper relit lights all below a blocking base without a
+    # word, and lights of one direction failed naming no file.
+    check_measured_lights(
+        args.field, field.light_directions, blocked_below=field.below_horizon == "blocked"
+    )
     for path in args.env:
         read_panorama(path)  # every panorama readable before any work starts
     if field.sample_kind == "pixels":

@@ -132,7 +132,8 @@ CASES: tuple[Case, ...] = (
             ("export-web", "-o", "{tmp}/web"),
         )
     ),
-    # ... and stores of them (before: fitted and relit)
+    # ... and stores of them (before: fitted and relit; batch --paper relit them, and batch
+    # and advise failed naming no file or a subset of it when they failed)
     *(
         Case(
             f"{command[0]}: {name}.zarr",
@@ -147,6 +148,8 @@ CASES: tuple[Case, ...] = (
         for command in (
             ("fit", "-o", "{tmp}/f.npz"),
             ("relight", "--env", PANO, "-o", "{tmp}/r.png"),
+            ("batch", "--env", PANO, "--sequence", "environment", "--paper", "-o", "{tmp}/b.zarr"),
+            ("advise", "--env", PANO),
         )
     ),
 )
