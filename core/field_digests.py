@@ -263,7 +263,9 @@ def binding_problems(
         ]
     attributes, metadata = metadata_digests(root, attrs, names)
     problems = _compared(
-        "attribute", record.attributes, attributes,
+        "attribute",
+        record.attributes,
+        attributes,
         lambda name: f"attribute {name} differs from what was written",
     )
     problems += _compared(

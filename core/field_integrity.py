@@ -154,8 +154,7 @@ def open_array(root: Path, group: Any, name: str) -> Any:
                 return array
             problem = "it is not an array"
     raise DatasetError(
-        f"{root}: array {name!r} ({name}/zarr.json): {problem}: its metadata was altered; "
-        f"{REBUILD}"
+        f"{root}: array {name!r} ({name}/zarr.json): {problem}: its metadata was altered; {REBUILD}"
     )
 
 
@@ -445,7 +444,10 @@ def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
 
 
 def _radiance_slabs(
-    path: Path, radiance: Any, incomplete: set[tuple[int, int]], problems: list[str],
+    path: Path,
+    radiance: Any,
+    incomplete: set[tuple[int, int]],
+    problems: list[str],
     progress: bool,
 ) -> tuple[list[bytes], bool]:
     """Every slab's digest (camera then light order) and whether any was unreadable.
