@@ -1,8 +1,8 @@
 """The reflectance-field store on disk: a Zarr group (schema version 1).
 
 Written by the simulator (``rig sim field``) and by processing (from captures) through
-:class:`FieldStoreWriter` (:mod:`core.field_writer`), read by everything downstream through
-:class:`ReflectanceField` (here); the names and numbers both follow are :mod:`core.field_schema`
+:class:`FieldStoreWriter` (:mod:`core.store.writer`), read by everything downstream through
+:class:`ReflectanceField` (here); the names and numbers both follow are :mod:`core.store.schema`
 (both re-exported here). Layout (S cameras, T lights, P surface samples):
 
 ===================== =============== ======================================================
@@ -27,7 +27,7 @@ with its distance; ``below_horizon``: what the capture states of the environment
 rig's horizon, see :data:`BELOW_HORIZON`), ``provenance`` (free-form dict: scene, tool,
 creation time...), ``radiance_digest``, ``dark_cameras`` and ``digests``, which bind every
 array and attribute to what was written: opening compares all but the radiance's values (read
-on demand; ``rig verify`` checks them) with them (:mod:`core.field_digests`,
+on demand; ``rig verify`` checks them) with them (:mod:`core.store.digests`,
 ``docs/field-store.md``).
 """
 
@@ -46,10 +46,10 @@ from numpy.typing import NDArray
 
 from core.camera_model import PinholeCamera
 from core.errors import DatasetError, InputError
-from core.field_attributes import check_directions, read_attributes
-from core.field_digests import require_bound
-from core.field_integrity import array_names, non_finite, open_arrays, read_checked
-from core.field_schema import (
+from core.store.attributes import check_directions, read_attributes
+from core.store.digests import require_bound
+from core.store.integrity import array_names, non_finite, open_arrays, read_checked
+from core.store.schema import (
     BELOW_HORIZON,
     FIELD_SCHEMA_VERSION,
     SAMPLE_CHUNK,
@@ -57,7 +57,7 @@ from core.field_schema import (
     companion_paths,
     is_field_store,
 )
-from core.field_writer import FieldStoreWriter, SlabWriter
+from core.store.writer import FieldStoreWriter, SlabWriter
 
 __all__ = [
     "BELOW_HORIZON",
@@ -264,7 +264,7 @@ class ReflectanceField:
     def camera_radiance(self, camera: int, samples: slice = slice(None)) -> NDArray[np.floating]:
         """Radiance (T, P', 3) of ``samples`` seen by ``camera``, in the storage dtype, uncached.
 
-        Read through :mod:`core.field_integrity`: a chunk that does not decode, and NaN or
+        Read through :mod:`core.store.integrity`: a chunk that does not decode, and NaN or
         infinity, are errors naming the store, camera, light and sample.
         """
         values = read_checked(self.path, self.radiance, (camera, slice(None), samples))

@@ -287,8 +287,8 @@ def _capture(config: Any, dataset: Any, plan: Any, *, progress: bool) -> Any:
 
 def _run_verify(args: argparse.Namespace) -> int:
     from capture.dataset import Dataset
-    from core.field_integrity import check_store
     from core.field_store import is_field_store
+    from core.store.integrity import check_store
 
     if is_field_store(args.dataset):
         check = check_store(args.dataset, progress=not args.quiet)

@@ -23,8 +23,8 @@ import pytest
 
 from app.cli import main
 from core.errors import InputError
-from core.field_integrity import check_store
 from core.field_store import FieldStoreWriter
+from core.store.integrity import check_store
 from sim.field import field_cameras
 from tests.processing.test_field_builder import make_capture
 

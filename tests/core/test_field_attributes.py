@@ -1,4 +1,4 @@
-"""core.field_attributes: any JSON in a store's attributes is read or refused by name."""
+"""core.store.attributes: any JSON in a store's attributes is read or refused by name."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from hypothesis.extra.numpy import arrays
 
 from core.camera_model import PinholeCamera
 from core.errors import DatasetError
-from core.field_attributes import UNIT_TOLERANCE, direction_problem, read_attributes
+from core.store.attributes import UNIT_TOLERANCE, direction_problem, read_attributes
 
 WHERE = Path("f.zarr")
 SHAPE = (2, 5, 12)  # S, T, P

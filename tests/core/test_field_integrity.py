@@ -12,8 +12,8 @@ import zarr
 from app.cli import main
 from core.camera_model import PinholeCamera
 from core.errors import DatasetError
-from core.field_integrity import check_store
 from core.field_store import FieldStoreWriter, ReflectanceField
+from core.store.integrity import check_store
 from sim.field import field_cameras, simulate_field
 
 

@@ -10,8 +10,8 @@ import zarr
 
 from core.camera_model import PinholeCamera
 from core.errors import DatasetError, InputError
-from core.field_integrity import check_store
 from core.field_store import FieldStoreWriter, ReflectanceField
+from core.store.integrity import check_store
 from sim.field import field_cameras, simulate_field
 from tests.full_disk import writes_under_limit
 
@@ -107,7 +107,7 @@ def test_a_store_is_put_in_place_only_when_complete(tmp_path: Path) -> None:
 def test_a_black_part_of_a_slab_is_written_not_left_out(tmp_path: Path) -> None:
     # A slab of several chunks whose second block is black (samples no camera sees): the
     # writer must store that chunk, or the store would read as damaged (a missing chunk).
-    from core.field_integrity import check_store
+    from core.store.integrity import check_store
 
     points = np.random.default_rng(0).normal(size=(10, 3)).astype(np.float32)
     writer = FieldStoreWriter(

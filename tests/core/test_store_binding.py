@@ -22,9 +22,9 @@ import zarr
 
 from app.cli import main
 from core.errors import DatasetError
-from core.field_integrity import check_store
 from core.field_store import ReflectanceField
-from core.field_writer import remove_stale_partials
+from core.store.integrity import check_store
+from core.store.writer import remove_stale_partials
 from sim.field import field_cameras, simulate_field
 
 

@@ -15,8 +15,8 @@ import pytest
 from app.cli import main
 from core.cluster import dask_client
 from core.errors import DatasetError, InputError
-from core.field_integrity import check_store
 from core.field_store import ReflectanceField
+from core.store.integrity import check_store
 from processing.sample_model_store import read_sample_models
 from processing.sample_models import BasisFit, SampleModels, fit_sample_models, sample_block_size
 from sim.field import field_cameras, simulate_field

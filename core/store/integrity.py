@@ -8,7 +8,7 @@ value are each a :class:`~core.errors.DatasetError` naming the store, the chunk'
 (for values) the count and the first location.
 
 Before any of that, :func:`open_array` holds an array's metadata (its ``zarr.json``) to the
-layout (:data:`core.field_schema.ARRAYS`): a shape with a negative size, chunks of another
+layout (:data:`core.store.schema.ARRAYS`): a shape with a negative size, chunks of another
 rank, a dtype the store never holds (float32 edited to int32 reads the same bytes as other
 numbers) are named with the store, the array and the value, not in zarr's words (" `chunk_shape`
 and `shape` need to have the same number of dimensions").
@@ -31,8 +31,9 @@ import zarr
 from numpy.typing import NDArray
 
 from core.errors import DatasetError
-from core.field_attributes import direction_problem, read_attributes
-from core.field_digests import (
+from core.progress import progress_bar
+from core.store.attributes import direction_problem, read_attributes
+from core.store.digests import (
     REBUILD,
     array_document,
     binding_problems,
@@ -41,8 +42,7 @@ from core.field_digests import (
     slab_digest,
     unbound_note,
 )
-from core.field_schema import ARRAYS
-from core.progress import progress_bar
+from core.store.schema import ARRAYS
 
 __all__ = [
     "CHUNK_MEANING",
@@ -97,7 +97,7 @@ def metadata_problem(root: Path, name: str) -> str | None:
     Raises
     ------
     DatasetError
-        The document is not readable JSON (named by :func:`core.field_digests.array_document`).
+        The document is not readable JSON (named by :func:`core.store.digests.array_document`).
     """
     document = array_document(root, name)
     if document.get("node_type", "array") != "array":
@@ -354,7 +354,7 @@ def _problem(path: Path, error: DatasetError) -> str:
 def _attribute_problems(
     path: Path, attrs: dict[str, Any], shape: tuple[int, int, int], values: dict[str, Any]
 ) -> list[str]:
-    """What :mod:`core.field_attributes` refuses in the store's attributes and directions."""
+    """What :mod:`core.store.attributes` refuses in the store's attributes and directions."""
     problems = []
     try:
         read_attributes(path, attrs, shape)
@@ -398,7 +398,7 @@ def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
     """Read every chunk of the field store at ``path``: present, decodable, finite, digests.
 
     Every array's metadata is held to the layout, every value read, and every array and
-    attribute compared with the digests its writer recorded (:mod:`core.field_digests`).
+    attribute compared with the digests its writer recorded (:mod:`core.store.digests`).
 
     Parameters
     ----------

@@ -3,7 +3,7 @@
 A store is a folder of JSON and chunk files that anything can edit: swap two cameras'
 visibility chunks, scale the points, copy a radiance chunk from another store, change a
 ``zarr.json``'s dtype from float32 to int32 (the same bytes then read as other numbers). Each
-edit leaves a store zarr reads without complaint. The writer (:mod:`core.field_writer`)
+edit leaves a store zarr reads without complaint. The writer (:mod:`core.store.writer`)
 therefore records, in the group attribute ``digests``, a SHA-256 of
 
 - every array's values (``data``): the radiance over its slabs (the ``radiance_digest``, as
@@ -20,7 +20,7 @@ so a store whose ``digests`` attribute was removed is damage, not a store writte
 digests were recorded: those have neither, stay readable, and ``rig verify`` says what no
 digest binds in them (:func:`unbound_note`). Opening a store checks everything but the
 radiance's values (:mod:`core.field_store`); ``rig verify`` checks the radiance too
-(:func:`core.field_integrity.check_store`).
+(:func:`core.store.integrity.check_store`).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.errors import DatasetError
-from core.field_schema import DIGESTED_MARK, DIGESTS_ATTRIBUTE
+from core.store.schema import DIGESTED_MARK, DIGESTS_ATTRIBUTE
 
 __all__ = [
     "DIGEST_VERSION",
@@ -243,7 +243,7 @@ def binding_problems(
 
     Checks the record's presence (a store marked :data:`DIGESTED_MARK` must have one), every
     attribute, every array's metadata, and the values of the arrays in ``values`` (the
-    radiance's are checked over its slabs by :func:`core.field_integrity.check_store`). A
+    radiance's are checked over its slabs by :func:`core.store.integrity.check_store`). A
     store without a record and without the mark (written before digests were recorded) has
     no problem here: see :func:`unbound_note`.
 

@@ -1,6 +1,6 @@
 """The field store's names and numbers: schema version, chunking, horizon statement, files.
 
-Shared by the writer (:mod:`core.field_writer`) and the reader (:mod:`core.field_store`), so
+Shared by the writer (:mod:`core.store.writer`) and the reader (:mod:`core.field_store`), so
 the two agree on them by construction.
 """
 
@@ -77,7 +77,7 @@ ARRAYS: dict[str, ArraySpec] = {
 }
 
 #: The group attribute where the writer records the digest of every array and attribute
-#: (:mod:`core.field_digests`); stores written before it was recorded have none.
+#: (:mod:`core.store.digests`); stores written before it was recorded have none.
 DIGESTS_ATTRIBUTE = "digests"
 #: The radiance array's attribute by which a store says its writer recorded
 #: :data:`DIGESTS_ATTRIBUTE`: a store that says so and lacks the record was altered.

@@ -1,9 +1,9 @@
 """Writing a reflectance-field store: :class:`FieldStoreWriter` and its :class:`SlabWriter`.
 
 The layout written is the one :mod:`core.field_store` documents and reads (names and numbers
-in :mod:`core.field_schema`): the store is built under a temporary name (``.NAME.PID.partial``
+in :mod:`core.store.schema`): the store is built under a temporary name (``.NAME.PID.partial``
 beside it), renamed when complete, and bound to digests of every array and attribute
-(:mod:`core.field_digests`).
+(:mod:`core.store.digests`).
 
 A build that is stopped (an error, Ctrl-C, SIGTERM, which ``rig`` raises as Ctrl-C) removes its
 partial store; one that is killed (SIGKILL, a power cut) cannot, and the next writer of a store
@@ -30,16 +30,16 @@ from zarr.core.array_spec import ArrayConfigParams
 from core.atomic import write_problem
 from core.camera_model import PinholeCamera
 from core.errors import DatasetError, InputError
-from core.field_attributes import direction_problem
-from core.field_digests import StoreDigests, array_digest, combined_digest, metadata_digests
-from core.field_integrity import (
+from core.store.attributes import direction_problem
+from core.store.digests import StoreDigests, array_digest, combined_digest, metadata_digests
+from core.store.integrity import (
     array_names,
     non_finite,
     radiance_digest,
     read_checked,
     slab_digest,
 )
-from core.field_schema import (
+from core.store.schema import (
     DIGESTED_MARK,
     DIGESTS_ATTRIBUTE,
     FIELD_SCHEMA_VERSION,
@@ -62,7 +62,7 @@ class FieldStoreWriter:
     under the real name, nor mixes new slabs into an old store. :meth:`finish` records the
     ``radiance_digest`` attribute (SHA-256 over every slab's SHA-256, in camera then light
     order), by which a saved model fit knows the data it was fitted to, and ``digests``: the
-    digests of every array and attribute (:mod:`core.field_digests`). The partial stores of
+    digests of every array and attribute (:mod:`core.store.digests`). The partial stores of
     writers of the same store that are gone are removed first (:attr:`removed_partials`).
 
     Parameters
