@@ -15,9 +15,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from tqdm import tqdm
-
 from core.atomic import atomic_path
+from core.progress import progress_bar
 from core.sample_data import panorama_path, rti_capture_path
 
 if TYPE_CHECKING:
@@ -35,7 +34,8 @@ DEMO_SIZE = 256
 def run_demo(directory: str | Path, *, quick: bool = False) -> Path:
     """Write the demo outputs under ``directory``; returns the path of ``report.md``.
 
-    ``quick`` relights smaller fields (for smoke tests).
+    ``quick`` relights smaller fields (for smoke tests). Its steps are counted with bars
+    (:mod:`core.progress`): ``rig demo`` draws them on the terminal.
     """
     import numpy as np
 
@@ -60,7 +60,7 @@ def run_demo(directory: str | Path, *, quick: bool = False) -> Path:
         "| run | K | seconds | total light R, G, B (radiance x sr) | pictures |",
         "|---|---|---|---|---|",
     ]
-    for name, controls in tqdm(runs, desc="sampling", unit="run"):
+    for name, controls in progress_bar(runs, desc="sampling", unit="run"):
         start = time.perf_counter()
         lighting = write_lighting_outputs(panorama, controls, out / "sampling" / name)
         seconds = time.perf_counter() - start
@@ -108,7 +108,7 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
         "| scene | method | relative RMSE | relight + splat ms | picture |",
         "|---|---|---|---|---|",
     ]
-    for scene in tqdm(DEMO_SCENES, desc="relighting", unit="scene"):
+    for scene in progress_bar(DEMO_SCENES, desc="relighting", unit="scene"):
         cameras = field_cameras(count, width=size, height=size)
         store = out / "fields" / f"{scene}.zarr"
         simulate_field(store, scene, lights=count, cameras=cameras, points=points, overwrite=True)

@@ -119,7 +119,7 @@ def validate_world_advisor(
         radiance, seen = truths[(env, view)]
         return relative_rmse_values(image.radiance, radiance, image.needed & seen)
 
-    models = models_for_field(field, models=PARAMETRIC_MODELS, progress=True)
+    models = models_for_field(field, models=PARAMETRIC_MODELS)
     return validate_advisor(name, field, models, views, true_error, panoramas,
                             samples=samples, tolerance=tolerance)  # fmt: skip
 
@@ -188,4 +188,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from core.progress import drawing_bars
+
+    with drawing_bars():  # the library's bars on stderr, as ``rig`` draws them
+        status = main()
+    raise SystemExit(status)

@@ -47,7 +47,7 @@ def bench_capture(cameras: int, lights: int, speed: float, size: int) -> dict[st
             planned=plan.planned_keys(config),
         )
         with SimulatedRig(config) as simulated, simulated.rig() as rig:
-            result = CaptureSession(rig, dataset, plan, progress=False).run()
+            result = CaptureSession(rig, dataset, plan).run()
         # Field building on the same dataset (what `rig process` does), for the throughput.
         started = time.perf_counter()
         sources = simulated_capture_sources(dataset.rig_config)

@@ -255,10 +255,8 @@ def main(argv: list[str] | None = None) -> int:
 
     fields_dir = args.fields or args.output / "fields"
     fields_dir.mkdir(parents=True, exist_ok=True)
-    rti = world_rti_captures(fields_dir, args.rti_world or ["clearcoat-relief"], args.rti_spec,
-                             progress=True)  # fmt: skip
-    worlds = world_fields(fields_dir, args.world or ["copper-bowl"], args.world_spec,
-                          progress=True)  # fmt: skip
+    rti = world_rti_captures(fields_dir, args.rti_world or ["clearcoat-relief"], args.rti_spec)
+    worlds = world_fields(fields_dir, args.world or ["copper-bowl"], args.world_spec)
     own = own_family_fields(fields_dir, quick=args.quick)
     results = run(args.output, quick=args.quick, rti_worlds=rti, worlds=worlds, own_family=own)
     print((args.output / "guard_advice.md").read_text(), end="")
@@ -267,4 +265,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from core.progress import drawing_bars
+
+    with drawing_bars():  # the library's bars on stderr, as ``rig`` draws them
+        status = main()
+    raise SystemExit(status)

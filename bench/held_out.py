@@ -130,7 +130,7 @@ WORLD_TEST_LIGHTS = 8
 
 
 def world_fields(
-    fields_dir: Path, names: Sequence[str], spec: WorldSpec, *, progress: bool = False
+    fields_dir: Path, names: Sequence[str], spec: WorldSpec
 ) -> list[tuple[str, Path, Path]]:
     """Render (once; cached in ``fields_dir``) the fit and test fields of each world.
 
@@ -139,7 +139,6 @@ def world_fields(
     fields_dir : Path, where the stores are kept between runs
     names : bundled worlds (:data:`sim.world.mitsuba.WORLDS`)
     spec : WorldSpec
-    progress : bool, progress bars while rendering
 
     Returns
     -------
@@ -153,18 +152,24 @@ def world_fields(
         stem = fields_dir / f"world-{name}-{cameras}x{lights}-{side}px-{spp}spp-{points}"
         fit, test = stem.with_suffix(".zarr"), stem.with_name(stem.name + "-test.zarr")
         if not fit.exists():
-            render_world_field(fit, world, lights=lights, cameras=views, points=points, spp=spp,
-                               layout="fibonacci", progress=progress)  # fmt: skip
+            render_world_field(
+                fit, world, lights=lights, cameras=views, points=points, spp=spp, layout="fibonacci"
+            )
         if not test.exists():
-            render_world_field(test, world, lights=hemisphere_layout(WORLD_TEST_LIGHTS, "grid"),
-                               cameras=views, points=points, spp=spp,
-                               progress=progress)  # fmt: skip
+            render_world_field(
+                test,
+                world,
+                lights=hemisphere_layout(WORLD_TEST_LIGHTS, "grid"),
+                cameras=views,
+                points=points,
+                spp=spp,
+            )
         made.append((name, fit, test))
     return made
 
 
 def world_rti_captures(
-    fields_dir: Path, names: Sequence[str], spec: RtiSpec, *, progress: bool = False
+    fields_dir: Path, names: Sequence[str], spec: RtiSpec
 ) -> list[tuple[str, Path, Path]]:
     """Make (once; cached in ``fields_dir``) an RTI capture of each world: (name, fit, test)."""
     made = []
@@ -172,7 +177,7 @@ def world_rti_captures(
         fit_count, test_count, width, height, spp = spec
         folder = fields_dir / f"rti-{name}-{fit_count}+{test_count}-{width}x{height}-{spp}spp"
         if not (folder / "test.lp").is_file():
-            make_world_rti(folder, name, spec, progress=progress)
+            make_world_rti(folder, name, spec)
         made.append((name, folder / "fit.lp", folder / "test.lp"))
     return made
 

@@ -50,7 +50,7 @@ def relative_rmse(image: RelitImage, reference: RelitImage) -> tuple[float, floa
 def _scene_rows(
     field: ReflectanceField, scene: str, size: int, bright_counts: list[int]
 ) -> list[dict[str, Any]]:
-    models = models_for_field(field, progress=True)
+    models = models_for_field(field)
     camera = PinholeCamera(20.0, 40.0, width=size, height=size)
     rows: list[dict[str, Any]] = []
     for env in PANORAMA_NAMES:
@@ -128,8 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         store = args.output / f"{scene}.zarr"
         if not store.exists():
             cameras = field_cameras(args.grid, width=96, height=96)
-            simulate_field(store, scene, lights=args.grid, cameras=cameras,
-                           points=args.points, progress=True)  # fmt: skip
+            simulate_field(store, scene, lights=args.grid, cameras=cameras, points=args.points)
         rows += _scene_rows(ReflectanceField.open(store), scene, args.size, bright_counts)
     result = {"points": args.points, "grid": args.grid, "size": args.size, "rows": rows}
     (args.output / "interactive.json").write_text(json.dumps(result, indent=2) + "\n")
@@ -140,4 +139,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from core.progress import drawing_bars
+
+    with drawing_bars():  # the library's bars on stderr, as ``rig`` draws them
+        status = main()
+    raise SystemExit(status)

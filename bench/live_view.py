@@ -110,12 +110,18 @@ def main(argv: list[str] | None = None) -> int:
     args.output.mkdir(parents=True, exist_ok=True)
     store = args.output / "live_view.zarr"
     cameras = field_cameras(args.grid, width=128, height=128)
-    simulate_field(store, "glossy-sphere", lights=args.grid, cameras=cameras,
-                   points=args.points, overwrite=True, progress=True)  # fmt: skip
+    simulate_field(
+        store,
+        "glossy-sphere",
+        lights=args.grid,
+        cameras=cameras,
+        points=args.points,
+        overwrite=True,
+    )
     field = ReflectanceField.open(store)
     panorama = read_panorama(panorama_path("courtyard"))
     session = LiveSession(
-        field, most_accurate_mode(field, progress=True), {"courtyard": panorama},
+        field, most_accurate_mode(field), {"courtyard": panorama},
         size=(args.size, args.size),
     )  # fmt: skip
     result = {
@@ -131,4 +137,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from core.progress import drawing_bars
+
+    with drawing_bars():  # the library's bars on stderr, as ``rig`` draws them
+        status = main()
+    raise SystemExit(status)

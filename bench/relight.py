@@ -83,7 +83,7 @@ def bench_speed(out: Path, points: int, repeats: int, panorama: Panorama) -> dic
     ]
     result["schemes"] = schemes
     start = time.perf_counter()
-    models = models_for_field(field, progress=True)
+    models = models_for_field(field)
     result["model_fit_or_load_s"] = time.perf_counter() - start
     result["model_schemes"] = [
         _bench_model_scheme(field, models, settings, panorama, camera, repeats)
@@ -273,7 +273,7 @@ def bench_accuracy(out: Path, quick: bool) -> tuple[list[dict[str, Any]], list[d
             path = field_path(out, scene, cameras, lights, points, size, "float32")
             field = ReflectanceField.open(path)
             start = time.perf_counter()
-            models = models_for_field(field, progress=True)
+            models = models_for_field(field)
             loo = _field_loo(field, models) | {"fit_or_load_s": time.perf_counter() - start}
             fields.append({"scene": scene, "S": cameras, "T": lights, "points": points} | loo)
             print(f"{scene} S={cameras} T={lights}: LOO {loo['loo']}")
@@ -425,4 +425,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from core.progress import drawing_bars
+
+    with drawing_bars():  # the library's bars on stderr, as ``rig`` draws them
+        status = main()
+    raise SystemExit(status)

@@ -75,7 +75,6 @@ def make_rti_capture(
     seed: int = 0,
     workers: int = 2,
     quality: int = 95,
-    progress: bool = False,
 ) -> Path:
     """Write an RTI capture of ``lights`` 8-bit JPEGs of about ``megapixels`` million pixels.
 
@@ -98,7 +97,9 @@ def make_rti_capture(
     workers : int, images made at once (threads: the decoding, resizing and encoding release
         the GIL)
     quality : int, JPEG quality
-    progress : bool, a line per image on stderr
+
+    The images written are counted with a bar (:mod:`core.progress`), shown by the caller's
+    hook.
 
     Returns
     -------
@@ -110,6 +111,7 @@ def make_rti_capture(
     from core.colour import linear_to_srgb
     from core.image_io import linear_from_pixels, read_pixels, write_srgb8
     from core.lp_format import read_lp, write_lp
+    from core.progress import progress_bar
     from core.sample_data import rti_capture_path
 
     source = read_lp(rti_capture_path())
@@ -141,11 +143,11 @@ def make_rti_capture(
         codes = encode[steps] + np.float32(NOISE) * noise
         write_srgb8(root / names[index], np.clip(np.round(codes), 0, 255).astype(np.uint8),
                     quality=quality)  # fmt: skip
-        if progress:
-            print(f"  {names[index]} ({width} x {height})", file=sys.stderr, flush=True)
 
     with ThreadPoolExecutor(max(1, workers)) as pool:
-        list(pool.map(one, range(len(chosen))))
+        made = pool.map(one, range(len(chosen)))
+        for _ in progress_bar(made, total=len(chosen), desc="capture", unit="image"):
+            pass
     write_lp(root / "dirs.lp", names, source.directions[chosen])
     return root / "dirs.lp"
 
@@ -185,7 +187,7 @@ def _import_stage(args: argparse.Namespace) -> int:
     """``--stage import``: :func:`processing.rti.import_rti` of ``--lp`` into ``--store``."""
     from processing.rti import import_rti
 
-    import_rti(args.lp, args.store, progress=False)
+    import_rti(args.lp, args.store)
     return 0
 
 

@@ -282,7 +282,7 @@ class SweepPlan:
 
     # -- the events ------------------------------------------------------------------------
 
-    def _schedules(self, config: RigConfig, *, progress: bool = False) -> dict[str, Schedule]:
+    def _schedules(self, config: RigConfig) -> dict[str, Schedule]:
         cached = self._cache.get(id(config))
         if cached is not None and cached[0] is config:
             return cached[1]
@@ -292,7 +292,6 @@ class SweepPlan:
             self.lights,
             dark_frames=self.dark_frames,
             calibration=[(c.camera_index, c.light_index) for c in self.calibration],
-            progress=progress,
         )
         self._cache.clear()
         self._cache[id(config)] = (config, built)
@@ -342,12 +341,12 @@ class SweepPlan:
 
     # -- the dry run -----------------------------------------------------------------------
 
-    def estimate(self, config: RigConfig, *, progress: bool = False) -> PlanEstimate:
+    def estimate(self, config: RigConfig) -> PlanEstimate:
         """Counts, motion, exposure and overhead seconds, in both orderings.
 
-        ``progress`` shows a bar when ordering the stops takes more than a second.
+        Ordering the stops reports a bar (:mod:`core.progress`) when it takes more than a second.
         """
-        built = self._schedules(config, progress=progress)
+        built = self._schedules(config)
         events = self._events(built[self.ordering])
         images = dict.fromkeys(IMAGE_KINDS, 0)
         for event in events:

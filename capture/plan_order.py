@@ -378,7 +378,6 @@ def _build(
     dark_frames: bool,
     calibration: Sequence[tuple[int, int | None]],
     ordering: str,
-    progress: bool,
 ) -> Schedule:
     builder = _Builder(config)
     for index, (c, t) in enumerate(calibration):
@@ -402,8 +401,7 @@ def _build(
     else:
         camera_order = _camera_tour(config, cameras, builder.current)
     # A bar only when ordering takes a while (thousands of pairs, forbidden boxes to sample).
-    bar = progress_bar(camera_order, desc=f"ordering ({ordering})", unit="camera", delay=1.0,
-               show=progress)  # fmt: skip
+    bar = progress_bar(camera_order, desc=f"ordering ({ordering})", unit="camera", delay=1.0)
     for position, c in enumerate(bar):
         if ordering == "serpentine":
             order = allowed[c] if position % 2 == 0 else allowed[c][::-1]
@@ -426,7 +424,6 @@ def schedules(
     *,
     dark_frames: bool = True,
     calibration: Sequence[tuple[int, int | None]] = (),
-    progress: bool = False,
 ) -> dict[str, Schedule]:
     """The stops of a sweep in each ordering, calibration stops first.
 
@@ -436,7 +433,6 @@ def schedules(
     cameras, lights : sequences of (azimuth_deg, inclination_deg)
     dark_frames : bool, a dark stop (light off) at each camera, before its light stops
     calibration : sequence of (camera index, light index or None for light off), in order
-    progress : bool, show a progress bar when ordering takes more than a second
 
     Returns
     -------
@@ -452,7 +448,6 @@ def schedules(
             dark_frames=dark_frames,
             calibration=calibration,
             ordering=ordering,
-            progress=progress,
         )
         for ordering in ORDERINGS
     }

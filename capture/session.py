@@ -180,7 +180,6 @@ class CaptureSession:
     dataset : Dataset, created with this plan (or opened to resume)
     plan : SweepPlan
     move_retries, capture_retries : attempts after a failed move or capture
-    progress : bool, show a progress bar with ETA
     targets : TargetPlacer, optional
         Called before an image whose target (a calibration capture's name, None for the object)
         differs from the one in place; a fresh run starts with the object in place.
@@ -200,7 +199,6 @@ class CaptureSession:
         *,
         move_retries: int = 2,
         capture_retries: int = 2,
-        progress: bool = True,
         targets: TargetPlacer | None = None,
         on_fault: FaultHandler | None = None,
     ) -> None:
@@ -209,7 +207,6 @@ class CaptureSession:
         self.plan = plan
         self.move_retries = move_retries
         self.capture_retries = capture_retries
-        self.progress = progress
         self.targets = targets
         self.on_fault = on_fault
         self._target: str | None = None  # what stands at the object's place
@@ -331,7 +328,6 @@ class CaptureSession:
             initial=already,
             desc="capture",
             unit="image",
-            show=self.progress,
         )
         try:
             if pending:

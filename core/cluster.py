@@ -164,7 +164,7 @@ def _announce(client: Any, what: str, dashboard: bool) -> None:
 
 
 def compute_each(
-    client: Any, tasks: Sequence[Any], *, progress: bool, what: str = "tasks"
+    client: Any, tasks: Sequence[Any], *, what: str = "tasks"
 ) -> Iterator[tuple[int, Any]]:
     """Compute Dask delayed ``tasks`` on ``client``; yield (index, value) as each finishes.
 
@@ -179,7 +179,7 @@ def compute_each(
 
     futures = client.compute(list(tasks))
     index = {id(future): i for i, future in enumerate(futures)}
-    bar = progress_bar(total=len(futures), desc=what, unit="task", show=progress)
+    bar = progress_bar(total=len(futures), desc=what, unit="task")
     try:
         for future in as_completed(futures):
             value = future.result()

@@ -155,7 +155,6 @@ def build_field(
     transfer: Transfer | None = None,
     light_model: dict[str, Any] | None = None,
     provenance: Mapping[str, Any] | None = None,
-    progress: bool = False,
     overwrite: bool = False,
     exclude: Collection[ImageKey] = (),
     client: Any = None,
@@ -180,7 +179,6 @@ def build_field(
     demosaic, transfer : passed to :func:`processing.decode.decode_image`
     light_model : dict, optional, the store's light model (default directional, unit intensity)
     provenance : mapping, optional, merged into the store's provenance
-    progress : bool, show a progress bar on the terminal (:mod:`core.progress`)
     overwrite : bool, replace a store already at ``output`` (and the fit saved beside it)
     exclude : image keys to leave out, as if never taken (files found missing or corrupt)
     client : distributed.Client, optional
@@ -256,7 +254,7 @@ def build_field(
     # SIGTERM, which rig raises as Ctrl-C) removes it, wherever it comes.
     try:
         decoding = {"demosaic": demosaic, "transfer": transfer}
-        counts = _build_into(store, data, layout, cloud, client, progress, decoding, radiance_scale)
+        counts = _build_into(store, data, layout, cloud, client, decoding, radiance_scale)
     except BaseException:
         store.abort()
         raise
@@ -286,7 +284,6 @@ def _build_into(
     layout: FieldLayout,
     cloud: PointCloud,
     client: Any,
-    progress: bool,
     decoding: dict[str, Any],
     radiance_scale: float,
 ) -> dict[str, int]:
@@ -307,7 +304,7 @@ def _build_into(
     jobs = [CameraJob(s, pinhole, brackets[s], darks[s], layout.light_directions, scales,
                       options, writer) for s, pinhole in enumerate(layout.cameras)]  # fmt: skip
     counts = {"exposures": 0, "darks": 0, "without_dark": 0, "visible": 0, "saturated": 0}
-    for result in _built_cameras(jobs, cloud, client, progress):
+    for result in _built_cameras(jobs, cloud, client):
         store.write_visibility(result.camera, result.visible)
         for t, (digest, peak) in result.slabs.items():
             store.record_slab(result.camera, t, digest, peak)
@@ -317,12 +314,10 @@ def _build_into(
     return counts
 
 
-def _built_cameras(
-    jobs: list[CameraJob], cloud: PointCloud, client: Any, progress: bool
-) -> Iterator[CameraResult]:
+def _built_cameras(jobs: list[CameraJob], cloud: PointCloud, client: Any) -> Iterator[CameraResult]:
     """Each camera's result as it is built: in turn here, or as Dask tasks finish."""
     if client is None:
-        for job in progress_bar(jobs, desc="process", unit="camera", show=progress):
+        for job in progress_bar(jobs, desc="process", unit="camera"):
             yield job.build(cloud)
         return
     from dask.delayed import delayed
@@ -331,7 +326,7 @@ def _built_cameras(
 
     shared = client.scatter(cloud, broadcast=True, hash=False)  # to each worker once
     tasks = [delayed(CameraJob.build, pure=False)(job, shared) for job in jobs]
-    for _, result in compute_each(client, tasks, progress=progress, what="process"):
+    for _, result in compute_each(client, tasks, what="process"):
         yield result
 
 

@@ -173,7 +173,6 @@ def process_dataset(
     allow_missing: bool = False,
     dtype: str = "float32",
     demosaic: str = "linear",
-    progress: bool = False,
     overwrite: bool = False,
     client: Any = None,
 ) -> FieldBuildReport:
@@ -187,7 +186,7 @@ def process_dataset(
     camera_distance, fov_deg, size : the camera model where the dataset does not say it (see
         :func:`dataset_camera_model`)
     ignore_calibration : bool, use the measured poses, not the manifest's calibration
-    light_intensity, allow_missing, dtype, demosaic, progress, overwrite, client : see
+    light_intensity, allow_missing, dtype, demosaic, overwrite, client : see
         :func:`processing.field_builder.build_field`
 
     Raises
@@ -227,7 +226,6 @@ def process_dataset(
         demosaic=demosaic,
         light_model=_light_model(data, sources),
         provenance={"tool": "rig process", **sources.provenance},
-        progress=progress,
         overwrite=overwrite,
         exclude={record.key for record in check.missing},
         client=client,

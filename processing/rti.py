@@ -97,11 +97,11 @@ def import_rti(
     output_store: str | os.PathLike[str],
     *,
     dtype: str = "auto",
-    progress: bool = True,
     overwrite: bool = True,
     transfer: TransferChoice = "auto",
     mask: str | os.PathLike[str] | None = None,
     below_horizon: BelowHorizon = "blocked",
+    print_assumed: bool = False,
 ) -> ReflectanceField:
     """Import an RTI capture (an ``.lp`` file and its images) as a single-view pixel field.
 
@@ -116,9 +116,9 @@ def import_rti(
         the same level: nothing is lost, and the store and every read of it are half the
         float32 size), float32 for 16-bit and float images and for images divided by light
         intensities.
-    progress : bool
-        Show a progress bar (one step per image) and print what the import assumed (the
-        ``assumed`` line below) to stderr first.
+    print_assumed : bool
+        Print what the import assumed (the ``assumed`` line below) to stderr first. The images
+        read are counted with a bar (:mod:`core.progress`), shown by the caller's hook.
     transfer : {"auto", "srgb", "linear"}
         How the images' integer values encode light. ``"auto"``: 8-bit images (JPEG, PNG, TGA,
         BMP...) are sRGB, 16-bit (PNG, TIFF) linear; float images (EXR, HDR, PFM, float TIFF)
@@ -227,7 +227,7 @@ def import_rti(
             ),
         ]
     )
-    if progress:
+    if print_assumed:
         print(assumed, file=sys.stderr)
     camera = rti_camera(width, height)
     writer = FieldStoreWriter(
@@ -271,7 +271,7 @@ def import_rti(
         },
     )
     try:
-        steps = progress_bar(total=len(paths), desc="rti", unit="image", show=progress)
+        steps = progress_bar(total=len(paths), desc="rti", unit="image")
         buffer: NDArray[np.floating] | None = None
         for index, pixels in enumerate(_decoded(paths, first, lp_file, lights)):
             where = f"{lp_file}, line {lights.line(index)}"
@@ -373,19 +373,19 @@ def export_lp(
 def open_field_or_rti(
     path: str | os.PathLike[str],
     *,
-    progress: bool = False,
     transfer: TransferChoice = "auto",
     mask: str | os.PathLike[str] | None = None,
     below_horizon: BelowHorizon | None = None,
+    print_assumed: bool = False,
 ) -> Iterator[ReflectanceField]:
     """Open a field store, or an RTI capture imported into a temporary store for the ``with``.
 
     Parameters
     ----------
     path : a field store directory, an ``.lp`` file, or a folder holding exactly one ``.lp``
-    progress : bool, a progress bar while importing (and the import's ``assumed`` line)
     transfer, mask : passed to :func:`import_rti` (a store is opened as it is: giving either
         for one is refused)
+    print_assumed : bool, passed to :func:`import_rti` (a store assumes nothing)
     below_horizon : {"blocked", "open"} or None
         What lies below the horizon (:data:`core.field_store.BELOW_HORIZON`): for a capture,
         passed to :func:`import_rti` (None: its default, ``"blocked"``); for a store, it
@@ -423,6 +423,7 @@ def open_field_or_rti(
         return
     with tempfile.TemporaryDirectory(prefix="rig-rti-") as scratch:
         yield import_rti(
-            lp, Path(scratch) / "field.zarr", progress=progress, transfer=transfer, mask=mask,
+            lp, Path(scratch) / "field.zarr", transfer=transfer, mask=mask,
             below_horizon=below_horizon or "blocked",
+            print_assumed=print_assumed,
         )  # fmt: skip

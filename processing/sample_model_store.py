@@ -127,7 +127,6 @@ def fit_to_file(
     *,
     memory_bytes: int | None = None,
     client: Any = None,
-    progress: bool = False,
 ) -> FitLayout:
     """Fit ``field`` block by block and write the fit to ``path`` as the blocks come.
 
@@ -140,7 +139,7 @@ def fit_to_file(
 
     Parameters
     ----------
-    field, models, memory_bytes, client, progress : as :func:`fit_sample_models`
+    field, models, memory_bytes, client : as :func:`fit_sample_models`
     path : the fit file to write (atomically: a failed fit leaves the old file or none)
 
     Returns
@@ -148,9 +147,7 @@ def fit_to_file(
     FitLayout, what was fitted (its models, in order)
     """
     target = Path(path)
-    layout, blocks = fit_blocks(
-        field, models, memory_bytes=memory_bytes, client=client, progress=progress
-    )
+    layout, blocks = fit_blocks(field, models, memory_bytes=memory_bytes, client=client)
     problem = output_problem(target)
     if problem is not None:
         raise InputError(problem)
@@ -322,7 +319,6 @@ def models_for_field(
     models: Sequence[str] | None = None,
     memory_bytes: int | None = None,
     client: Any = None,
-    progress: bool = False,
 ) -> SampleModels:
     """The fit of ``field``: read from ``path`` (default beside the field) or fitted and saved.
 
@@ -345,11 +341,7 @@ def models_for_field(
                 return saved
     if output_problem(target) is not None:
         # Relighting does not need the file (the next run fits again): fitted in memory.
-        return fit_sample_models(
-            field, models, memory_bytes=memory_bytes, client=client, progress=progress
-        )
+        return fit_sample_models(field, models, memory_bytes=memory_bytes, client=client)
     # Written as it is fitted, then read: the fit is never held twice, nor whole while fitted.
-    layout = fit_to_file(
-        field, target, models, memory_bytes=memory_bytes, client=client, progress=progress
-    )
+    layout = fit_to_file(field, target, models, memory_bytes=memory_bytes, client=client)
     return read_sample_models(target, field, models=layout.names)

@@ -160,7 +160,6 @@ class Advisor:
         models a field of its kind can fit)
     samples : int, samples to work on (point fields; pixel fields use all)
     seed : int, of the sample subset
-    progress : bool, progress bars
     """
 
     def __init__(
@@ -170,7 +169,6 @@ class Advisor:
         *,
         samples: int = ADVISOR_SAMPLES,
         seed: int = 0,
-        progress: bool = False,
     ) -> None:
         s_count, t_count, p_count = field.shape
         if t_count < FEWEST_LIGHTS:
@@ -189,7 +187,6 @@ class Advisor:
             raise InputError("no candidate configurations to compare")
         self.candidates = list(candidates)
         self.field_samples = p_count
-        self.progress = progress
         keep: NDArray[np.int64] | None = None
         if field.sample_kind == "points" and p_count > samples:
             seen = np.flatnonzero(field.visibility.any(axis=0))
@@ -221,8 +218,9 @@ class Advisor:
             s_count, t_count, _ = self.part.shape
             light_held = _folds(t_count)
             camera_held = _folds(s_count) if self.views_tested else []
-            steps = progress_bar(total=len(light_held) + len(camera_held), desc="hold-out fits",
-                         unit="fold", show=self.progress)  # fmt: skip
+            steps = progress_bar(
+                total=len(light_held) + len(camera_held), desc="hold-out fits", unit="fold"
+            )
             self._light_folds, self._camera_folds = [], []
             for held in light_held:
                 self._light_folds.append(self._fold(held, t_count, "lights"))
@@ -325,7 +323,7 @@ class Advisor:
         timed = set(cameras[:: max(len(cameras) // TIMING_VIEWS, 1)][:TIMING_VIEWS])
         reference: dict[str, list[tuple[NDArray[np.float32], NDArray[np.bool_]]]] = {}
         predictions = []
-        for candidate in progress_bar(self.candidates, desc="candidates", show=self.progress):
+        for candidate in progress_bar(self.candidates, desc="candidates"):
             relit, prepare_ms, render_ms = _timed_radiance(
                 self._engine(candidate.mode), part, panorama, cameras, timed
             )
@@ -380,11 +378,10 @@ def advise(
     candidates: Sequence[Candidate] | None = None,
     samples: int = ADVISOR_SAMPLES,
     seed: int = 0,
-    progress: bool = False,
 ) -> Advice:
     """The cheapest configuration predicted within ``tolerance`` on ``field`` under ``panorama``.
 
     See :class:`Advisor` (parameters) and the module docstring (how errors are predicted).
     """
-    advisor = Advisor(field, candidates, samples=samples, seed=seed, progress=progress)
+    advisor = Advisor(field, candidates, samples=samples, seed=seed)
     return advisor.advise(panorama, tolerance)

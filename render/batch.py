@@ -71,9 +71,7 @@ class BatchPlan:
             raise InputError(f"{self.mode.describe()} relights through a saved fit: name it")
 
 
-def relight_batch(
-    plan: BatchPlan, output: str | os.PathLike[str], *, client: Any = None, progress: bool = False
-) -> Path:
+def relight_batch(plan: BatchPlan, output: str | os.PathLike[str], *, client: Any = None) -> Path:
     """Relight every environment of ``plan`` into the store ``output``; returns its path.
 
     Parameters
@@ -81,7 +79,6 @@ def relight_batch(
     plan : BatchPlan
     output : path of the new store (``.zarr``); an existing one is refused
     client : distributed.Client, optional; one task per environment on its cluster
-    progress : bool, a progress bar over the environments
 
     Raises
     ------
@@ -112,7 +109,7 @@ def relight_batch(
     try:
         indices = range(len(plan.panoramas))
         if client is None:
-            for index in progress_bar(indices, desc="environments", unit="env", show=progress):
+            for index in progress_bar(indices, desc="environments", unit="env"):
                 relight_environment(plan, index, str(partial))
         else:
             from dask.delayed import delayed
@@ -122,7 +119,7 @@ def relight_batch(
             tasks = [
                 delayed(relight_environment, pure=False)(plan, i, str(partial)) for i in indices
             ]
-            for _ in compute_each(client, tasks, progress=progress, what="environments"):
+            for _ in compute_each(client, tasks, what="environments"):
                 pass  # each task wrote its frames
     except BaseException:
         shutil.rmtree(partial, ignore_errors=True)

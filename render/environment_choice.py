@@ -111,7 +111,7 @@ class EnvironmentChoice:
     reason: str
 
 
-def environment_mode(name: str, *, progress: bool = False) -> RelightMode:
+def environment_mode(name: str) -> RelightMode:
     """The relighting mode that relights a field of pixels with candidate ``name``."""
     if name == LIGHT_STAGE:
         return RelightSettings(scheme="projection", view_interpolation="nearest")
@@ -121,7 +121,7 @@ def environment_mode(name: str, *, progress: bool = False) -> RelightMode:
         )
     if name == "lambert+ggx":
         return replace(MOST_ACCURATE_MODELS, model="lambert+ggx")
-    return PredictorRelightSettings(method=name, progress=progress)
+    return PredictorRelightSettings(method=name)
 
 
 Split = tuple[str, NDArray[np.int64], NDArray[np.int64], float]
@@ -205,7 +205,6 @@ def choose_environment_mode(
     candidates: Sequence[str] | None = None,
     models: SampleModels | None = None,
     fast: bool = False,
-    progress: bool = False,
 ) -> EnvironmentChoice:
     """Choose how a field of pixels is relit under ``panorama`` (see the module).
 
@@ -218,7 +217,6 @@ def choose_environment_mode(
     models : SampleModels, optional, a saved fit of the field (else fitted, or read from beside
         a store)
     fast : bool, leave out the candidates that train a network
-    progress : bool, a progress bar over the candidates
 
     Raises
     ------
@@ -232,8 +230,7 @@ def choose_environment_mode(
     errors: dict[str, list[float]] = {name: [] for name in names}
     seconds = dict.fromkeys(names, 0.0)
     notes: dict[str, str] = {}
-    bar = progress_bar(total=len(names) * len(splits), desc="choosing", unit="method",
-               show=progress)  # fmt: skip
+    bar = progress_bar(total=len(names) * len(splits), desc="choosing", unit="method")
     everything = np.arange(field.shape[1], dtype=np.int64)
     ratios = [_gap_ratio(field, panorama, split, below=i > 0) for i, split in enumerate(splits)]
     try:
@@ -278,5 +275,5 @@ def choose_environment_mode(
         f"{best.error:.1%} error{against} ({sum(seconds.values()):.0f} s to choose among "
         f"{len(names)})"
     )
-    mode = environment_mode(best.name, progress=progress)
+    mode = environment_mode(best.name)
     return EnvironmentChoice(mode, scores, tuple(name for name, _, _, _ in splits), reason)

@@ -366,7 +366,6 @@ def evaluate(
     scale: float | None = None,
     mask: NDArray[np.bool_] | None = None,
     test_names: Sequence[str] | None = None,
-    progress: bool = False,
     client: Any = None,
     sample: PixelSample | None = None,
 ) -> Evaluation:
@@ -380,7 +379,6 @@ def evaluate(
     scale : float, optional, the linear value of 8-bit white (default: see the module)
     mask : ndarray (H, W) of bool, optional (pixel fields), the pixels that count
     test_names : names of the test lights (default ``light N``)
-    progress : bool, a bar over the methods
     client : distributed.Client, optional; one Dask task per method on its cluster (the
         scores are the same; the times are the workers')
     sample : PixelSample, optional, the tiles of a large view ``fit`` and ``test`` hold
@@ -402,7 +400,7 @@ def evaluate(
         scale = 1.0 if rti else display_scale(stack)
     if client is None:
         results = []
-        with progress_bar(total=len(methods), desc="evaluate", unit="method", show=progress) as bar:
+        with progress_bar(total=len(methods), desc="evaluate", unit="method") as bar:
             for name in methods:
                 bar.set_description(f"evaluate: {name}")  # which method the time goes to
                 results.append(_score_method(fit, test, name, scale, views, images))
@@ -419,9 +417,7 @@ def evaluate(
         fields = client.scatter([fit, test], broadcast=True, hash=False)
         tasks = [delayed(_score_on_worker, pure=False)(*fields, name, scale, mask)
                  for name in methods]  # fmt: skip
-        scored: dict[int, MethodResult] = dict(
-            compute_each(client, tasks, progress=progress, what="evaluate")
-        )
+        scored: dict[int, MethodResult] = dict(compute_each(client, tasks, what="evaluate"))
         results = [scored[i] for i in range(len(methods))]
     s_count, t_test, _ = test.shape
     names = (

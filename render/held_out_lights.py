@@ -61,7 +61,7 @@ def test_field_from_lp(
     ``sample``, only its tiles are kept (the import streams, the tiles are read from it).
     """
     with tempfile.TemporaryDirectory(prefix="rig-evaluate-") as scratch:
-        store = import_rti(lp_path, Path(scratch) / "test.zarr", progress=False, transfer=transfer)
+        store = import_rti(lp_path, Path(scratch) / "test.zarr", transfer=transfer)
         # In memory: the temporary store goes.
         return store.subset() if sample is None else sample.take(store)
 

@@ -214,18 +214,18 @@ def _summed_interpolation(
 
 
 def _fitted_models(
-    field: ReflectanceField, names: list[str], models: SampleModels | None, progress: bool
+    field: ReflectanceField, names: list[str], models: SampleModels | None
 ) -> SampleModels:
     if models is not None and all(n in models.fits for n in names):
         return models
     if field.radiance_digest is not None:  # a store: its fit is saved beside it and reused
-        return models_for_field(field, models=names, progress=progress)
+        return models_for_field(field, models=names)
     # Held in memory (a split's subset): nothing saved, but kept while the subset lives, so the
     # rungs built on one model (the model, its residual, the adaptive mixture) fit it once.
     fitted = _FITTED.setdefault(field, {})
     key = tuple(sorted(names))
     if key not in fitted:
-        fitted[key] = fit_sample_models(field, names, progress=progress)
+        fitted[key] = fit_sample_models(field, names)
     return fitted[key]
 
 
@@ -237,7 +237,6 @@ def make_predictor(
     scale: float = 1.0,
     sigma: float | None = None,
     learned: TrainingSettings | None = None,
-    progress: bool = False,
 ) -> LightPredictor:
     """The predictor ``name`` (a :data:`PREDICTORS` entry) of ``field``.
 
@@ -250,7 +249,6 @@ def make_predictor(
     scale : float, linear value that 8-bit white stands for (the ``-8bit`` bases)
     sigma : float, optional, the ``rbf`` width (default: chosen by leave-one-light-out)
     learned : TrainingSettings, optional, how the ``learned`` model trains (default settings)
-    progress : bool, progress bars while fitting
 
     Raises
     ------
@@ -269,17 +267,17 @@ def make_predictor(
         )
         return _Interpolating(field, name, chosen)
     if name.removesuffix("+residual") == "learned":
-        network = _Learned(field, "learned", learned or TrainingSettings(), progress)
+        network = _Learned(field, "learned", learned or TrainingSettings())
         return _Residual(field, name, network) if name.endswith("+residual") else network
     basis = name.removesuffix("-8bit")
     if basis in BASIS_MODELS:
         return _Basis(field, name, basis, name.endswith("-8bit"), scale)
     if name.startswith("light-stage+"):
         model = name.removeprefix("light-stage+")
-        fitted = _fitted_models(field, [model], models, progress)
+        fitted = _fitted_models(field, [model], models)
         return _Residual(field, name, _Model(field, model, fitted), interpolation="nearest")
     model = "lambert+ggx" if name == "adaptive" else name.removesuffix("+residual")
-    fitted = _fitted_models(field, [model], models, progress)
+    fitted = _fitted_models(field, [model], models)
     base = _Model(field, model, fitted)
     if name == "adaptive":
         return _Adaptive(field, name, _Residual(field, "lambert+ggx+residual", base))

@@ -20,17 +20,15 @@ def write_lighting_outputs(
     panorama: Panorama,
     controls: LightingControls,
     directory: str | os.PathLike[str],
-    *,
-    progress: bool = False,
 ) -> EnvironmentLighting:
     """Sample and disassemble ``panorama`` and write the three files into ``directory``.
 
     ``overlay.png`` shows the tone-mapped panorama with the Voronoi cell borders and samples;
     ``lights.png`` fills each cell with its light's mean radiance, at the same exposure.
-    ``progress`` shows the steps when they take more than a second (a first run compiles the
-    numerical kernels, which are cached afterwards).
+    The steps are reported (:mod:`core.progress`) when they take more than a second (a first
+    run compiles the numerical kernels, which are cached afterwards).
     """
-    steps = progress_bar(total=3, desc="sample and gather", unit="step", delay=1.0, show=progress)
+    steps = progress_bar(total=3, desc="sample and gather", unit="step", delay=1.0)
     with steps:
         lighting = light_environment(panorama, controls)
         out = Path(directory)

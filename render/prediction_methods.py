@@ -271,7 +271,6 @@ class _Learned:
     field: ReflectanceField
     name: str
     settings: TrainingSettings
-    progress: bool
     _codes: dict[int, NDArray[np.float32]] = default(default_factory=dict)
 
     def _train(self, cameras: list[int], lights: NDArray[np.float64]) -> LearnedRTI:
@@ -288,7 +287,7 @@ class _Learned:
         values = np.concatenate(parts, axis=1)
         if values.shape[1] == 0:
             raise InputError(f"{self.field.path}: no camera sees any sample; nothing to learn")
-        bar = progress_bar(desc="training", unit="step", show=self.progress)
+        bar = progress_bar(desc="training", unit="step")
 
         def advance(step: int, planned: int) -> None:
             # The steps foreseen change as training learns its pace (a time budget).

@@ -55,12 +55,10 @@ class PredictorRelightSettings:
     method : str, a :data:`render.light_prediction.PREDICTORS` entry
     grid_height : int, the panorama summed into ``grid_height`` x 2 ``grid_height`` blocks
         (the blocks below a blocked horizon carry no light and are skipped)
-    progress : bool, progress bars while the predictor trains or fits
     """
 
     method: str
     grid_height: int = 32
-    progress: bool = False
 
     def __post_init__(self) -> None:
         if self.method not in PREDICTORS:
@@ -134,9 +132,7 @@ class PredictorRelighter(PanoramaLitEngine):
         self.field = field_store
         super().__init__(field_store)
         self.settings = settings
-        self.predictor: LightPredictor = make_predictor(
-            field_store, settings.method, models=models, progress=settings.progress
-        )
+        self.predictor: LightPredictor = make_predictor(field_store, settings.method, models=models)
         self._environment: EnvironmentLighting | None = None
         self._lights: LightSet | None = None
         self._radiance: NDArray[np.float32] | None = None

@@ -200,7 +200,6 @@ def most_accurate_mode(
     models: SampleModels | None = None,
     *,
     models_path: str | os.PathLike[str] | None = None,
-    progress: bool = False,
 ) -> ModeChoice:
     """Choose between per-sample models and interpolation by their error on held-out lights.
 
@@ -210,7 +209,6 @@ def most_accurate_mode(
     models : SampleModels, optional
         Default: the fit saved at ``models_path`` (default beside the field), or a new fit
         (saved there).
-    progress : bool, progress bars while fitting
 
     Returns
     -------
@@ -229,7 +227,7 @@ def most_accurate_mode(
     """
     linear = best_settings(field)
     if models is None:
-        models = models_for_field(field, models_path, progress=progress)
+        models = models_for_field(field, models_path)
     chosen = choose_model(models).chosen
     how = "held-out lights (every other light)"
     try:

@@ -160,7 +160,6 @@ def choose_mode(
     seen: Panorama | None,
     *,
     models: SampleModels | None = None,
-    progress: bool = False,
 ) -> ChosenMode:
     """The relighting mode ``request`` asks for on ``field``.
 
@@ -173,7 +172,6 @@ def choose_mode(
         it. None (several panoramas, as ``rig batch``): the choice on held-out lights alone.
     models : SampleModels, optional, the field's fit when the caller has it (else read from
         ``request.models_path`` or beside the field, or fitted, as the mode needs)
-    progress : bool, progress bars of the fits and the choice
 
     Raises
     ------
@@ -196,18 +194,16 @@ def choose_mode(
             model=request.model, lighting=lighting, k=k, sampler=request.sampler, grid_height=grid
         )
         if models is None:
-            models = models_for_field(field, request.models_path, progress=progress)
+            models = models_for_field(field, request.models_path)
         return ChosenMode(mode, models)
     steering = request._steering()
     unsteered = all(value is None for value in steering.values())
     if request.method != "auto" or (
         field.sample_kind == "pixels" and unsteered and seen is not None
     ):
-        return _pixel_field_mode(field, request, seen, models, progress=progress)
+        return _pixel_field_mode(field, request, seen, models)
     if unsteered:
-        choice = most_accurate_mode(
-            field, models, models_path=request.models_path, progress=progress
-        )
+        choice = most_accurate_mode(field, models, models_path=request.models_path)
         chosen = choice.mode
         if chosen == MOST_ACCURATE_MODELS:
             chosen = replace(MOST_ACCURATE_MODELS, grid_height=grid)
@@ -227,8 +223,6 @@ def _pixel_field_mode(
     request: ModeRequest,
     seen: Panorama | None,
     models: SampleModels | None,
-    *,
-    progress: bool,
 ) -> ChosenMode:
     """``method`` (or its automatic choice under the panorama) on a field of pixels."""
     if field.sample_kind != "pixels":
@@ -244,11 +238,9 @@ def _pixel_field_mode(
     # A saved fit serves the choice and the engine instead of a new one.
     saved = None if request.models_path is None else models_for_field(field, request.models_path)
     if request.method != "auto":
-        return ChosenMode(environment_mode(request.method, progress=progress), saved)
+        return ChosenMode(environment_mode(request.method), saved)
     assert seen is not None  # choose_mode sends "auto" here only with a panorama
-    choice = choose_environment_mode(
-        field, seen, models=saved, fast=request.fast, progress=progress
-    )
+    choice = choose_environment_mode(field, seen, models=saved, fast=request.fast)
     return ChosenMode(choice.mode, saved, None, choice.reason, choice.scores)
 
 
@@ -293,7 +285,6 @@ def prepare_relighting(
     request: RelightRequest,
     *,
     models: SampleModels | None = None,
-    progress: bool = False,
 ) -> PreparedRelighting:
     """Resolve ``request``'s mode, measure its warnings and open its engine, lit, at its view.
 
@@ -302,7 +293,7 @@ def prepare_relighting(
     """
     seen = request.lighting.as_seen(request.panorama, field)
     if isinstance(request.mode, ModeRequest):
-        chosen = choose_mode(field, request.mode, seen, models=models, progress=progress)
+        chosen = choose_mode(field, request.mode, seen, models=models)
     else:
         chosen = ChosenMode(request.mode, models)
     warnings = relighting_warnings(field, request.camera, seen, chosen)
@@ -357,10 +348,9 @@ def relight_request(
     request: RelightRequest,
     *,
     models: SampleModels | None = None,
-    progress: bool = False,
 ) -> Relit:
     """Relight ``field`` as ``request`` asks: the image, the mode, the warnings and notes."""
-    prepared = prepare_relighting(field, request, models=models, progress=progress)
+    prepared = prepare_relighting(field, request, models=models)
     image = prepared.engine.render()
     notes = relighting_notes(image, uses_models=prepared.chosen.mode.uses_models)
     return Relit(image, prepared.chosen, prepared.warnings, notes)

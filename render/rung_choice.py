@@ -139,10 +139,10 @@ class RungChoice:
     weights: NDArray[np.float32] | None = None
     predictors: dict[str, LightPredictor] = default(default_factory=dict, compare=False)
 
-    def predictor(self, whole: ReflectanceField, *, progress: bool = False) -> LightPredictor:
+    def predictor(self, whole: ReflectanceField) -> LightPredictor:
         """The winner fitted on every light of ``whole`` (the field it was chosen on)."""
         names = self.members if self.name == "mixture" else (self.name,)
-        rungs = [self.predictors.get(n) or make_predictor(whole, n, progress=progress)
+        rungs = [self.predictors.get(n) or make_predictor(whole, n)
                  for n in names]  # fmt: skip
         if self.name != "mixture":
             return rungs[0]
@@ -212,7 +212,6 @@ def choose_light_rung(
     candidates: Sequence[str] | None = None,
     mix: bool = True,
     learned: TrainingSettings | None = None,
-    progress: bool = False,
 ) -> RungChoice:
     """Choose the rung (or the per-pixel mixture) that predicts ``field``'s lights best.
 
@@ -226,7 +225,6 @@ def choose_light_rung(
         :data:`SLOW_CANDIDATES` unless ``fast``)
     mix : bool, also try the per-pixel mixture (fields of pixels)
     learned : TrainingSettings, optional, how the learned rung trains (its default settings)
-    progress : bool, a bar over the folds and candidates
 
     Raises
     ------
@@ -247,8 +245,7 @@ def choose_light_rung(
     trials: dict[str, _Trial] = {}
     seconds = dict.fromkeys(names, 0.0)
     notes: dict[str, str] = {}
-    bar = progress_bar(total=len(names) * (len(folds) + 1), desc="choosing", unit="fit",
-               show=progress)  # fmt: skip
+    bar = progress_bar(total=len(names) * (len(folds) + 1), desc="choosing", unit="fit")
     try:
         for name in names:
             start = time.perf_counter()

@@ -38,7 +38,6 @@ def relight_sequence(
     exposure: float = 1.0,
     modulation: NDArray[np.floating] | None = None,
     display_exposure: float | None = None,
-    progress: bool = False,
 ) -> list[NDArray[np.uint8]]:
     """Tone-mapped frames of a full turn in ``frames`` equal steps.
 
@@ -54,7 +53,6 @@ def relight_sequence(
     yaw_deg, exposure, modulation : the lighting controls of the first frame
     display_exposure : float, optional, the tone-mapping exposure (default: the first frame's
         :func:`render.tonemap.auto_exposure`)
-    progress : bool, a progress bar
 
     Returns
     -------
@@ -70,7 +68,7 @@ def relight_sequence(
     else:
         engine.set_lighting(panorama, yaw_deg=yaw_deg, exposure=exposure, modulation=modulation)
     pictures = []
-    for frame in progress_bar(range(frames), desc="frames", unit="frame", show=progress):
+    for frame in progress_bar(range(frames), desc="frames", unit="frame"):
         step = 360.0 * frame / frames
         if kind == "environment":
             engine.set_lighting(

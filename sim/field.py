@@ -55,7 +55,6 @@ def simulate_field(
     points: int = 100_000,
     layout: str = "grid",
     dtype: str = "float32",
-    progress: bool = False,
     overwrite: bool = False,
     sample_chunk: int = SAMPLE_CHUNK,
 ) -> Path:
@@ -94,7 +93,7 @@ def simulate_field(
         for s, camera in enumerate(cameras):
             store.write_visibility(s, camera_visibility(samples, camera))
         total = len(light_directions) * len(cameras)
-        steps = progress_bar(total=total, desc="field", unit="slab", show=progress)
+        steps = progress_bar(total=total, desc="field", unit="slab")
         for t, direction in enumerate(light_directions):
             toward = (float(direction[0]), float(direction[1]), float(direction[2]))
             light = DirectionalLight(toward)

@@ -53,12 +53,9 @@ def shade_environment(
     lights: LightSet,
     *,
     shadows: bool = True,
-    progress: bool = False,
 ) -> NDArray[np.float64]:
     """Radiance (P, 3) of every point toward ``viewpoint`` under directional ``lights``."""
-    return shade_environment_views(
-        samples, [viewpoint], lights, shadows=shadows, progress=progress
-    )[0]
+    return shade_environment_views(samples, [viewpoint], lights, shadows=shadows)[0]
 
 
 def shade_environment_views(
@@ -67,7 +64,6 @@ def shade_environment_views(
     lights: LightSet,
     *,
     shadows: bool = True,
-    progress: bool = False,
 ) -> list[NDArray[np.float64]]:
     """:func:`shade_environment` toward several viewpoints, each light's shadow map made once.
 
@@ -84,7 +80,7 @@ def shade_environment_views(
         samples.alpha.astype(np.float64),
     )
     starts = range(0, len(directions), CHUNK)
-    for start in progress_bar(starts, desc="shading", unit="chunk", show=progress):
+    for start in progress_bar(starts, desc="shading", unit="chunk"):
         chunk = slice(start, start + CHUNK)
         if shadows:
             visible = np.stack(
@@ -105,13 +101,10 @@ def render_environment(
     *,
     grid_height: int | None = 32,
     shadows: bool = True,
-    progress: bool = False,
 ) -> SyntheticImage:
     """The ground-truth image of ``samples`` under the panorama ``rgb`` seen by ``camera``."""
     lights = grid_lights(np.asarray(rgb), grid_height)
-    radiance = shade_environment(
-        samples, camera.position, lights, shadows=shadows, progress=progress
-    )
+    radiance = shade_environment(samples, camera.position, lights, shadows=shadows)
     return image_of_points(samples, camera, radiance)
 
 

@@ -94,7 +94,6 @@ def make_world_rti(
     *,
     max_depth: int = DEFAULT_MAX_DEPTH,
     image_format: Literal["tiff16", "jpeg"] = "tiff16",
-    progress: bool = False,
 ) -> None:
     """Path-trace an RTI capture of ``world`` into ``folder``: fit.lp, test.lp, images, masks.
 
@@ -110,14 +109,20 @@ def make_world_rti(
     spec : RtiSpec, (fit lights, test lights, width, height, samples per pixel)
     max_depth : int, the path tracer's longest path
     image_format : {"tiff16", "jpeg"}
-    progress : bool, progress bars while rendering
     """
     fit_count, test_count, width, height, spp = spec
-    fit = render_world_rti(world, fit_count, width=width, height=height, spp=spp,
-                           max_depth=max_depth, progress=progress)  # fmt: skip
-    test = render_world_rti(world, hemisphere_layout(test_count, "grid"), width=width,
-                            height=height, spp=spp, max_depth=max_depth, seed=1,
-                            progress=progress)  # fmt: skip
+    fit = render_world_rti(
+        world, fit_count, width=width, height=height, spp=spp, max_depth=max_depth
+    )
+    test = render_world_rti(
+        world,
+        hemisphere_layout(test_count, "grid"),
+        width=width,
+        height=height,
+        spp=spp,
+        max_depth=max_depth,
+        seed=1,
+    )
     # The two sets' masks differ by the path tracer's noise at the silhouette: pool the values.
     covered = np.concatenate([fit.images[:, fit.alpha >= 0.5].ravel(),
                               test.images[:, test.alpha >= 0.5].ravel()])  # fmt: skip

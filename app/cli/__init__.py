@@ -42,6 +42,7 @@ from app.cli.sample import add_sample
 from app.cli.sim import add_sim
 from app.cli.view import add_view
 from core.errors import RigError
+from core.progress import drawing_bars
 
 __all__ = ["build_parser", "main"]
 
@@ -80,7 +81,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     SIGTERM both unwind the command (see :func:`_unwind_on_sigterm`): what it created is
     removed, a line on stderr says it was stopped, and the status is the shell's convention,
     128 + the signal's number (130, 143), unless the command handles the stop itself (``rig
-    view``, ``rig capture``) and returns its own.
+    view``, ``rig capture``) and returns its own. The library's progress is drawn on stderr
+    (:func:`_drawing_progress`).
     """
     try:
         args = build_parser().parse_args(argv)
@@ -94,7 +96,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     with _unwind_on_sigterm() as received:
         try:
             check_file_arguments(args)  # a FIFO or a device would block or never end
-            status: int = args.handler(args)
+            with _drawing_progress(args):
+                status: int = args.handler(args)
         except RigError as error:
             print(f"rig {args.command}: error: {error}", file=sys.stderr)
             return 2
@@ -111,6 +114,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             _silence_stdout()
             return 128 + signal.SIGPIPE
     return status
+
+
+def _drawing_progress(args: argparse.Namespace) -> contextlib.AbstractContextManager[object]:
+    """Draw the library's progress bars on stderr while the command runs, unless ``--quiet``.
+
+    The library only reports its work (:mod:`core.progress`); here it is drawn, a tqdm bar for
+    each bar under way, closed when the command ends however it ends.
+    """
+    if getattr(args, "quiet", False):
+        return contextlib.nullcontext()
+    return drawing_bars()
 
 
 def _stdout_gone() -> bool:

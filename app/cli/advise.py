@@ -48,7 +48,7 @@ def add_advisor_options(p: argparse.ArgumentParser) -> None:
 def run_advisor(
     field_path: Path, env: Path, tolerance: float, samples: int
 ) -> tuple[Advice, tuple[int, int]]:
-    """Open the field and the panorama, and advise (progress bars on).
+    """Open the field and the panorama, and advise.
 
     Also returns the field's camera and light counts.
     """
@@ -68,7 +68,7 @@ def run_advisor(
         print(panorama.note)
     s, t, p = field.shape
     print(f"{field_path}: {s} cameras x {t} lights x {p} samples; environment {env}")
-    advice = Advisor(field, samples=samples, progress=True).advise(panorama, tolerance)
+    advice = Advisor(field, samples=samples).advise(panorama, tolerance)
     return advice, (s, t)
 
 

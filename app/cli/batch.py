@@ -111,11 +111,9 @@ def _run_batch(args: argparse.Namespace) -> int:
         models = None
         if not args.paper:
             # Fitted once here (on the cluster), read by every task.
-            models = models_for_field(field, memory_bytes=args.max_memory, client=client,
-                                      progress=not args.quiet)  # fmt: skip
+            models = models_for_field(field, memory_bytes=args.max_memory, client=client)
         # One mode for every environment: chosen on held-out lights, not under one panorama.
-        chosen = choose_mode(field, ModeRequest(paper=args.paper), None, models=models,
-                             progress=not args.quiet)  # fmt: skip
+        chosen = choose_mode(field, ModeRequest(paper=args.paper), None, models=models)
         if chosen.reason is not None:
             print(f"relighting mode: {chosen.reason}", file=sys.stderr)
         mode = chosen.mode
@@ -125,7 +123,7 @@ def _run_batch(args: argparse.Namespace) -> int:
             panoramas=tuple(str(p) for p in args.env), camera=camera, sequence=args.sequence,
             frames=args.frames,
         )  # fmt: skip
-        store = relight_batch(plan, args.output, client=client, progress=not args.quiet)
+        store = relight_batch(plan, args.output, client=client)
     if args.gif:
         folder = args.output.with_suffix("")
         folder.mkdir(parents=True, exist_ok=True)

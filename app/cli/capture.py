@@ -162,7 +162,7 @@ def _run_capture(args: argparse.Namespace) -> int:
         )
     _say_what_is_left_out(plan, config)
     with dataset.lock:  # before the rig's ports are opened: one capture per dataset
-        result = _capture(config, dataset, plan, progress=not args.quiet)
+        result = _capture(config, dataset, plan)
     print(
         f"{result.exit_status}: {result.taken} images taken, {result.already_done} already "
         f"there, {result.retaken} re-taken -> {dataset.path}"
@@ -226,7 +226,7 @@ def _say_what_is_left_out(plan: Any, config: Any, listed: int = 3) -> None:
         print(f"  ... and {len(left_out) - listed} more")
 
 
-def _capture(config: Any, dataset: Any, plan: Any, *, progress: bool) -> Any:
+def _capture(config: Any, dataset: Any, plan: Any) -> Any:
     """Run the plan on the devices the config names.
 
     A config whose ports are :data:`rig.config.IN_PROCESS_PORT` (``rig capture --sim``) gets
@@ -263,9 +263,7 @@ def _capture(config: Any, dataset: Any, plan: Any, *, progress: bool) -> Any:
         stack.enter_context(rig)
         # A person at the terminal can fix a fault and go on; unattended, the run pauses.
         handler = console_fault_handler if sys.stdin.isatty() else None
-        session = CaptureSession(
-            rig, dataset, plan, progress=progress, targets=placer, on_fault=handler
-        )
+        session = CaptureSession(rig, dataset, plan, targets=placer, on_fault=handler)
         stops = (signal.SIGINT, signal.SIGTERM)
         previous = {number: signal.getsignal(number) for number in stops}
 
@@ -291,7 +289,7 @@ def _run_verify(args: argparse.Namespace) -> int:
     from core.store.integrity import check_store
 
     if is_field_store(args.dataset):
-        check = check_store(args.dataset, progress=not args.quiet)
+        check = check_store(args.dataset)
         print(check.summary())
         return 0 if check.ok else 1
     # Not strict: a journal or manifest of another dataset is damage to report, not a refusal.

@@ -119,7 +119,9 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     from render.evaluation import evaluate
     from render.held_out_lights import against_test, held_out_split
 
-    with open_field_or_rti(args.field, progress=not args.quiet, transfer=args.transfer) as field:
+    with open_field_or_rti(
+        args.field, transfer=args.transfer, print_assumed=not args.quiet
+    ) as field:
         mask = None if args.mask is None else _read_mask(args.mask, field.image_shape)
         # In memory: the field's lights split, or the test capture; a large view as tiles of
         # it, read band by band (render.held_out_lights.pixel_sample), never whole.
@@ -139,7 +141,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
                   "--methods rbf,ptm-8bit,hsh3-8bit,adaptive", file=sys.stderr)  # fmt: skip
         with cluster_for(args) as client:
             result = evaluate(pair.fit, pair.test, args.methods, mask=pair.mask,
-                              test_names=names, progress=not args.quiet, client=client,
+                              test_names=names, client=client,
                               sample=pair.sample)  # fmt: skip
     result = dataclasses.replace(result, field=str(args.field), test=where)
     table = result.markdown()
@@ -198,7 +200,7 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
     # The light-stage sum's image under one light is the nearest measured image.
     method = "nearest" if args.method == "light-stage" else args.method
     if method == "auto":
-        choice = choose_light_rung(field, directions, fast=args.fast, progress=True)
+        choice = choose_light_rung(field, directions, fast=args.fast)
         for score in choice.scores:
             psnr = f"{score.psnr:6.2f} dB" if math.isfinite(score.psnr) else "   n/a   "
             note = f" {score.note}" if score.note else ""
@@ -206,9 +208,9 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
         method = choice.describe()
         print(f"method: {method} (best held-out PSNR, {' and '.join(choice.folds)}; chosen in "
               f"{sum(s.seconds for s in choice.scores if s.name != 'mixture'):.0f} s)")  # fmt: skip
-        predictor = choice.predictor(field, progress=True)
+        predictor = choice.predictor(field)
     else:
-        predictor = make_predictor(field, method, progress=True)
+        predictor = make_predictor(field, method)
     predicted = predictor.predict(camera, directions)
     scale = (
         1.0

@@ -124,7 +124,7 @@ def _run_export_web(args: argparse.Namespace) -> int:
         print(f"  {message}", file=sys.stderr, flush=True)
 
     with open_field_or_rti(
-        args.field, progress=not args.quiet, transfer=args.transfer, mask=args.mask
+        args.field, transfer=args.transfer, mask=args.mask, print_assumed=not args.quiet
     ) as field:
         cameras = field.shape[0]
         if not 0 <= args.camera < cameras:

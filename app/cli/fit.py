@@ -69,7 +69,6 @@ def _run_fit(args: argparse.Namespace) -> int:
         # for the five models) are never held whole.
         fitted = fit_to_file(
             field, target, args.models, memory_bytes=budget, client=client,
-            progress=not args.quiet,
         )  # fmt: skip
     elapsed = time.perf_counter() - started
     print(f"{', '.join(fitted.names)} fitted to {p} samples in {elapsed:.1f} s -> {target}")

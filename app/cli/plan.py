@@ -78,7 +78,7 @@ def plan_report(
     """
     from capture.plan import IMAGE_OVERHEAD_S
 
-    estimate = plan.estimate(config, progress=True)
+    estimate = plan.estimate(config)
     exposures = ", ".join(f"{ms:g}" for ms in plan.exposures_ms)
     images = ", ".join(f"{kind} {count}" for kind, count in estimate.images.items())
     lines = [

@@ -160,7 +160,6 @@ def _process(args: argparse.Namespace, dataset: Any, client: Any) -> Any:
         allow_missing=args.allow_missing,
         dtype=args.dtype,
         demosaic=args.demosaic,
-        progress=True,
         overwrite=args.overwrite,
         client=client,
     )

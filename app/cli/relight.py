@@ -128,7 +128,7 @@ def _run_relight(args: argparse.Namespace) -> int:
     if (args.env is None) == (args.lights is None):
         raise InputError("give --env PANORAMA (an environment) or --lights FILE.lp (lights)")
     if args.lights is not None:
-        with open_field_or_rti(args.field, progress=True, transfer=args.transfer) as field:
+        with open_field_or_rti(args.field, transfer=args.transfer, print_assumed=True) as field:
             return relight_lights(args, field)
     require_output(args.output)  # a file, checked before the work
     suffix = args.output.suffix.lower()
@@ -141,7 +141,7 @@ def _run_relight(args: argparse.Namespace) -> int:
         print(panorama.note)
     modulation = None if args.modulation is None else read_modulation_map(args.modulation)
     with open_field_or_rti(
-        args.field, progress=True, transfer=args.transfer, below_horizon=args.below_horizon
+        args.field, transfer=args.transfer, below_horizon=args.below_horizon, print_assumed=True
     ) as field:
         return _relight_field(args, field, panorama, modulation, suffix)
 
@@ -183,7 +183,7 @@ def _relight_field(
     request = RelightRequest(
         panorama=panorama, camera=camera, lighting=lighting, mode=_mode_request(args)
     )
-    prepared = prepare_relighting(field, request, progress=True)
+    prepared = prepare_relighting(field, request)
     for score in prepared.chosen.scores:
         print(f"  {score.name:<22} {score.error:7.2%}  ({score.seconds:.1f} s)")
     if prepared.chosen.reason is not None:
@@ -206,7 +206,7 @@ def _relight_field(
         return 0
     frames = relight_sequence(
         prepared.engine, panorama, camera, kind=args.sequence, frames=args.frames,
-        progress=True, yaw_deg=args.yaw, exposure=args.exposure, modulation=modulation,
+        yaw_deg=args.yaw, exposure=args.exposure, modulation=modulation,
     )  # fmt: skip
     if resample_to is not None:
         say_resampled(native, resample_to)

@@ -70,7 +70,7 @@ def _run_sample(args: argparse.Namespace) -> int:
         exposure=args.exposure,
     )
     with _whole_folder(args.output) as folder:
-        lighting = write_lighting_outputs(panorama, controls, folder, progress=True)
+        lighting = write_lighting_outputs(panorama, controls, folder)
     lights = lighting.light_set()
     print(
         f"{lights.k} lights ({controls.method}) from {panorama.source} "

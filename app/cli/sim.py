@@ -181,7 +181,7 @@ def _run_sim_field(args: argparse.Namespace) -> int:
         render_world_field(
             args.output, load_world(args.scene), lights=args.lights, cameras=cameras,
             points=args.points, spp=args.spp, max_depth=args.max_depth, layout=args.layout,
-            dtype=args.dtype, progress=True, overwrite=args.overwrite,
+            dtype=args.dtype, overwrite=args.overwrite,
         )  # fmt: skip
     else:
         simulate_field(
@@ -192,7 +192,6 @@ def _run_sim_field(args: argparse.Namespace) -> int:
             points=args.points,
             layout=args.layout,
             dtype=args.dtype,
-            progress=True,
             overwrite=args.overwrite,
         )
     print(
@@ -212,8 +211,7 @@ def _run_sim_rti(args: argparse.Namespace) -> int:
     world = load_world(args.scene)  # a bad world is refused before anything renders
     width, height = args.size
     spec = (args.lights, args.test_lights, width, height, args.spp)
-    make_world_rti(out, str(world.source), spec, max_depth=args.max_depth,
-                   image_format=args.format, progress=True)  # fmt: skip
+    make_world_rti(out, str(world.source), spec, max_depth=args.max_depth, image_format=args.format)
     print(f"{world.name}: {args.lights} fit + {args.test_lights} test lights, {width}x{height}, "
           f"{args.spp} spp -> {out}/ (rig evaluate {out / 'fit.lp'} --test "
           f"{out / 'test.lp'})")  # fmt: skip
@@ -258,7 +256,6 @@ def _run_sim_render(args: argparse.Namespace) -> int:
         camera,
         grid_height=args.grid or None,
         shadows=not spec.convex,
-        progress=True,
     )
     write_exr(args.output, image.rgb, image.coverage.astype("float32"))
     print(f"{spec.name} under {panorama.source} from {args.view} -> {args.output}")

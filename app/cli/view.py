@@ -90,7 +90,7 @@ def open_session(
 
     loaded = panoramas if isinstance(panoramas, dict) else read_panoramas(panoramas)
     stage("choosing the most accurate mode (fitting the models once; a saved fit is reused)")
-    choice = most_accurate_mode(field, models_path=models, progress=True)
+    choice = most_accurate_mode(field, models_path=models)
     print(f"best mode: {choice.reason}")
     return LiveSession(
         field, choice, loaded, size=size, truth=field_truth(field.provenance), source=source
@@ -104,7 +104,7 @@ def _run_view(args: argparse.Namespace) -> int:
     from processing.rti import open_field_or_rti
 
     with open_field_or_rti(
-        args.field, progress=True, transfer=args.transfer, below_horizon=args.below_horizon
+        args.field, transfer=args.transfer, below_horizon=args.below_horizon, print_assumed=True
     ) as field:
         # The page is served at once and says what is being prepared (the best mode's fit
         # takes seconds to minutes); a panorama that cannot be read fails the command first.

@@ -248,6 +248,6 @@ def bench_product(config: SuiteConfig, chain: FieldRun | None, fields_dir: Path)
             spec, dtype = config.loop_field
             scene = _LOOP_SCENE
             field = ReflectanceField.open(field_path(fields_dir.parent, scene, *spec, dtype))
-            models = models_for_field(field, progress=True)
+            models = models_for_field(field)
         out["loop"] = bench_loop(scene, spec, field, models, config.repeats, bandwidth)
     return out

@@ -394,7 +394,7 @@ def _opened(path: Path) -> tuple[Any, dict[str, Any], list[str]]:
     return group, arrays, problems
 
 
-def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
+def check_store(path: Path) -> StoreCheck:
     """Read every chunk of the field store at ``path``: present, decodable, finite, digests.
 
     Every array's metadata is held to the layout, every value read, and every array and
@@ -403,7 +403,6 @@ def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
     Parameters
     ----------
     path : the store's directory
-    progress : bool, show a progress bar over the radiance chunks
     """
     try:
         group, arrays, problems = _opened(path)
@@ -431,7 +430,7 @@ def check_store(path: Path, *, progress: bool = False) -> StoreCheck:
     s, t, p, _ = radiance.shape
     attrs = dict(group.attrs)
     problems += _attribute_problems(path, attrs, (s, t, p), values)
-    digests, unreadable = _radiance_slabs(path, radiance, incomplete, problems, progress)
+    digests, unreadable = _radiance_slabs(path, radiance, incomplete, problems)
     digest = _radiance_verdict(path, attrs, None if unreadable else digests, problems)
     try:
         problems += binding_problems(path, attrs, arrays, values)
@@ -448,7 +447,6 @@ def _radiance_slabs(
     radiance: Any,
     incomplete: set[tuple[int, int]],
     problems: list[str],
-    progress: bool,
 ) -> tuple[list[bytes], bool]:
     """Every slab's digest (camera then light order) and whether any was unreadable.
 
@@ -458,7 +456,7 @@ def _radiance_slabs(
     digests: list[bytes] = []
     unreadable = False
     keys = [(a, b) for a in range(s) for b in range(t)]
-    for a, b in progress_bar(keys, desc="verify", unit="slab", show=progress):
+    for a, b in progress_bar(keys, desc="verify", unit="slab"):
         if (a, b) in incomplete:
             unreadable = True
             continue

@@ -75,7 +75,6 @@ def fit_sample_models(
     refine_normals: bool | None = None,
     memory_bytes: int | None = None,
     client: Any = None,
-    progress: bool = False,
 ) -> SampleModels:
     """Fit per-sample models to every sample of a field and score them by leave-one-light-out.
 
@@ -107,7 +106,6 @@ def fit_sample_models(
         each worker reads its block from the store, so ``field`` must be a store on disk, not
         a subset in memory); the results are the same as in-process. ``memory_bytes`` then
         bounds each task's block.
-    progress : bool, show a progress bar over the blocks
 
     Returns
     -------
@@ -124,7 +122,6 @@ def fit_sample_models(
     layout, blocks = fit_blocks(
         field, models, alpha_range=alpha_range, shadow_ratio=shadow_ratio,
         refine_normals=refine_normals, memory_bytes=memory_bytes, client=client,
-        progress=progress,
     )  # fmt: skip
     arrays = {
         key: np.empty((layout.sample_count, *shape), dtype=dtype)
@@ -145,7 +142,6 @@ def fit_blocks(
     refine_normals: bool | None = None,
     memory_bytes: int | None = None,
     client: Any = None,
-    progress: bool = False,
 ) -> tuple[FitLayout, Iterator[tuple[slice, BlockFits]]]:
     """The fit of :func:`fit_sample_models`, block by block of samples, for a caller to place.
 
@@ -211,8 +207,7 @@ def fit_blocks(
         basis_terms={name: terms[name] for name in names if name in BASIS_MODELS},
         normals_fitted=refine or (pixels and field.normals is None),
     )
-    return layout, _run_blocks(field, job, points, sample_block_size(field, budget), client,
-                               progress)  # fmt: skip
+    return layout, _run_blocks(field, job, points, sample_block_size(field, budget), client)
 
 
 def _run_blocks(
@@ -221,7 +216,6 @@ def _run_blocks(
     points: NDArray[np.float64] | None,
     block: int,
     client: Any,
-    progress: bool,
 ) -> Iterator[tuple[slice, BlockFits]]:
     """Fit every block of ``block`` samples (see :func:`fit_blocks`)."""
     p_count = field.shape[2]
@@ -236,7 +230,7 @@ def _run_blocks(
         return seen, chunk_points, normals
 
     if client is None:
-        for start, stop in progress_bar(blocks, desc="fit", unit="block", show=progress):
+        for start, stop in progress_bar(blocks, desc="fit", unit="block"):
             yield slice(start, stop), job.run(field.sample_block(start, stop),
                                               *inputs(start, stop))  # fmt: skip
         return
@@ -250,7 +244,7 @@ def _run_blocks(
         )
         for start, stop in blocks
     ]
-    for index, fitted in compute_each(client, tasks, progress=progress, what="fit"):
+    for index, fitted in compute_each(client, tasks, what="fit"):
         start, stop = blocks[index]
         yield slice(start, stop), fitted
 

@@ -163,7 +163,6 @@ def render_world_field(
     seed: int = 0,
     layout: str = "grid",
     dtype: str = "float32",
-    progress: bool = False,
     overwrite: bool = False,
     variant: str = DEFAULT_VARIANT,
 ) -> Path:
@@ -184,7 +183,6 @@ def render_world_field(
         seed derived from it, so the noise of different images is independent)
     layout : str, of the lights when given as a count (``core.directions.hemisphere_layout``)
     dtype : {"float32", "float16"}, of the stored radiance
-    progress : bool, show a progress bar over the S x T images
     overwrite : bool, replace a store already at ``path``
     variant : str, Mitsuba variant
 
@@ -263,7 +261,7 @@ def render_world_field(
             "created": datetime.now(UTC).isoformat(timespec="seconds"),
         },
     )
-    steps = progress_bar(total=count, desc="world field", unit="image", show=progress)
+    steps = progress_bar(total=count, desc="world field", unit="image")
     try:
         for s, camera in enumerate(cameras):
             renderer = renderer_for(camera)

@@ -59,7 +59,6 @@ def render_world_rti(
     max_depth: int = DEFAULT_MAX_DEPTH,
     layout: str = "fibonacci",
     seed: int = 0,
-    progress: bool = False,
 ) -> RtiCapture:
     """Path-trace one overhead image per light.
 
@@ -72,7 +71,6 @@ def render_world_rti(
     spp, max_depth : the path tracer's settings (noise: ``docs/world.md``)
     layout : "fibonacci" or "grid", when ``lights`` is a count
     seed : int, of the first image's sampler (each image has its own)
-    progress : bool, a progress bar over the images
 
     Raises
     ------
@@ -95,7 +93,7 @@ def render_world_rti(
     renderer = WorldRenderer(scene, camera, spp=spp, max_depth=max_depth)
     images = np.zeros((len(directions), height, width, 3), dtype=np.float32)
     alpha = np.zeros((height, width), dtype=np.float32)
-    steps = progress_bar(directions, desc="rti", unit="image", show=progress)
+    steps = progress_bar(directions, desc="rti", unit="image")
     for t, toward in enumerate(steps):
         image = renderer.render(toward, seed=(seed * 100_003 + t) % 2**32)
         images[t] = image.rgb

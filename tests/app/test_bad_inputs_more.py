@@ -77,7 +77,7 @@ def workspace(tmp_path_factory: pytest.TempPathFactory) -> Workspace:
         write_lp(files / f"{name}.lp", names, lights)
         _pixel_store(files / f"{name}.zarr", lights)
     with contextlib.redirect_stderr(io.StringIO()):
-        import_rti(files / "spread.lp", root / "field.zarr", progress=False)
+        import_rti(files / "spread.lp", root / "field.zarr")
     return Workspace(
         root=root, field=root / "field.zarr", dataset=root / "no-dataset",
         panorama=panorama_path("courtyard"), rti=rti_capture_path(),

@@ -161,7 +161,7 @@ def test_dragging_the_light_pad_moves_the_highlight(browser: Any, tmp_path: Path
 
 def test_the_page_draws_what_rig_relight_writes_at_that_light(browser: Any, tmp_path: Path) -> None:
     capture = rti_capture_path()
-    field = import_rti(capture, tmp_path / "lion.zarr", progress=False)
+    field = import_rti(capture, tmp_path / "lion.zarr")
     server = _serve(field, capture)
     try:
         page, errors = _open_page(browser, server.url)

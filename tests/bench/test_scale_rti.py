@@ -38,7 +38,7 @@ def test_a_capture_is_the_bundled_one_upscaled_and_is_made_again_alike(tmp_path:
     np.testing.assert_allclose(lights.directions, bundled.directions[chosen], atol=1e-12)
     for name in lights.files:
         assert (lp.parent / name).read_bytes() == (again.parent / name).read_bytes()
-    field = import_rti(lp, tmp_path / "a.zarr", progress=False)
+    field = import_rti(lp, tmp_path / "a.zarr")
     assert field.shape == (1, 8, width * height) and field.image_shape == (height, width)
     assert field.dtype == np.float16  # 8-bit JPEGs
     # Each image, brought back to the bundled size, is the bundled image (the texture and

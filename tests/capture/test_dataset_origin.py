@@ -50,7 +50,7 @@ def _capture(path: Path, plan: SweepPlan | None = None) -> Path:
         path, rig_config=config.to_dict(), plan=plan.to_dict(), planned=plan.planned_keys(config)
     )
     with SimulatedRig(config) as simulated, simulated.rig() as rig:
-        result = CaptureSession(rig, dataset, plan, progress=False).run()
+        result = CaptureSession(rig, dataset, plan).run()
     assert result.exit_status == "success", result.reason
     return path
 
@@ -278,7 +278,7 @@ def test_a_resume_with_another_datasets_journal_takes_nothing(
     _foreign(ours, captures[1], "journal.jsonl")
     dataset = Dataset.open(ours, strict=False)
     with SimulatedRig(_config()) as simulated, simulated.rig() as rig:
-        session = CaptureSession(rig, dataset, _plan(), progress=False)
+        session = CaptureSession(rig, dataset, _plan())
         with pytest.raises(DatasetError, match="belongs to another dataset"):
             session.run()
         assert not any("G1" in line for line in simulated.gantry.lines)
@@ -314,7 +314,7 @@ def test_a_dataset_made_before_ids_verifies_with_a_note_and_resumes_as_it_was(
     # A resume re-takes a deleted image; the dataset stays one without ids.
     (ours / _file(LIGHTS[1])).unlink()
     with SimulatedRig(_config()) as simulated, simulated.rig() as rig:
-        result = CaptureSession(rig, Dataset.open(ours), _plan(), progress=False).run()
+        result = CaptureSession(rig, Dataset.open(ours), _plan()).run()
     assert (result.exit_status, result.taken) == ("success", 1), result.reason
     again = Dataset.open(ours)
     assert again.dataset_id is None and again.verify().ok
@@ -348,7 +348,7 @@ def test_a_dataset_made_before_ids_with_another_journal_is_named(
 def test_a_session_with_another_plan_than_the_datasets_is_refused(ours: Path) -> None:
     other = grid_plan(2, 3, exposures_ms=(30.0,), layout="fibonacci")
     with SimulatedRig(_config()) as simulated, simulated.rig() as rig:
-        session = CaptureSession(rig, Dataset.open(ours), other, progress=False)
+        session = CaptureSession(rig, Dataset.open(ours), other)
         with pytest.raises(DatasetError, match="made with another plan than the one given"):
             session.run()
         assert not any("G1" in line for line in simulated.gantry.lines)

@@ -61,7 +61,7 @@ def _session(
             planned=plan.planned_keys(config),
         )
     with SimulatedRig(config, **faults) as simulated, simulated.rig() as rig:
-        yield CaptureSession(rig, dataset, plan, progress=False), simulated, rig
+        yield CaptureSession(rig, dataset, plan), simulated, rig
 
 
 def _digests(path: Path) -> dict[str, str]:
@@ -298,7 +298,7 @@ def test_a_capture_from_an_unsafe_start_parks_first(tmp_path: Path) -> None:
     )  # fmt: skip
     with SimulatedRig(config, light_start_deg=(0.0, 5.0)) as simulated, simulated.rig() as rig:
         assert pose_violation(config, rig.pose()) is not None
-        result = CaptureSession(rig, dataset, _plan(), progress=False).run()
+        result = CaptureSession(rig, dataset, _plan()).run()
     assert result.exit_status == "success", result.reason
     assert Dataset.open(tmp_path / "d").verify().complete
 
@@ -318,7 +318,7 @@ def test_a_capture_from_an_unsafe_start_without_a_way_out_says_what_to_do(
         planned=_plan().planned_keys(config),
     )  # fmt: skip
     with SimulatedRig(config, light_start_deg=(0.0, 5.0)) as simulated, simulated.rig() as rig:
-        result = CaptureSession(rig, dataset, _plan(), progress=False).run()
+        result = CaptureSession(rig, dataset, _plan()).run()
         moves = sum("G1" in line for line in simulated.gantry.lines)
     assert result.exit_status == "failed"
     assert "which is unsafe" in result.reason and "by hand" in result.reason

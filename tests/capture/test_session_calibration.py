@@ -91,7 +91,6 @@ def test_the_placer_is_called_when_the_target_changes(tmp_path: Path) -> None:
         FakeRig(config, log),
         dataset,
         plan,
-        progress=False,
         targets=lambda n: log.append(("place", n)),
     )
     assert session.run().exit_status == "success"
@@ -107,13 +106,13 @@ def test_a_resumed_run_places_the_first_target_again(tmp_path: Path) -> None:
     config, plan, dataset = _setup(tmp_path)
     log: list[object] = []
     rig = FakeRig(config, log, stop_after=3)
-    session = CaptureSession(rig, dataset, plan, progress=False, targets=lambda n: log.append(n))
+    session = CaptureSession(rig, dataset, plan, targets=lambda n: log.append(n))
     rig.session = session
     assert session.run().exit_status == "paused"
     assert log == ["charuco", "image", "image", "mirror-sphere", "image"]
     log.clear()
     session = CaptureSession(
-        FakeRig(config, log), Dataset.open(dataset.path), plan, progress=False,
+        FakeRig(config, log), Dataset.open(dataset.path), plan,
         targets=lambda n: log.append(n),
     )  # fmt: skip
     assert session.run().exit_status == "success"
@@ -124,7 +123,7 @@ def test_a_resumed_run_places_the_first_target_again(tmp_path: Path) -> None:
 
 def test_without_a_placer_calibration_plans_still_run(tmp_path: Path) -> None:
     config, plan, dataset = _setup(tmp_path)
-    result = CaptureSession(FakeRig(config, []), dataset, plan, progress=False).run()
+    result = CaptureSession(FakeRig(config, []), dataset, plan).run()
     assert result.exit_status == "success" and result.taken == len(plan.events(config))
 
 

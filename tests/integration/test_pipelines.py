@@ -56,7 +56,7 @@ def test_a_simulated_capture_relights_close_to_the_truth(tmp_path: Path) -> None
         planned=plan.planned_keys(config),
     )  # fmt: skip
     with SimulatedRig(config) as simulated, simulated.rig() as rig:
-        result = CaptureSession(rig, dataset, plan, progress=False).run()
+        result = CaptureSession(rig, dataset, plan).run()
     assert result.exit_status == "success"
     report = Dataset.open(tmp_path / "d").verify()
     assert report.ok and report.complete

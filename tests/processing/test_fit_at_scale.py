@@ -239,7 +239,7 @@ def pixels(tmp_path_factory: pytest.TempPathFactory) -> Path:
     albedo = 0.3 + 0.2 * np.sin(x[:, :, None] * np.array([1.0, 1.7, 2.3]))
     images = albedo[None] * np.clip(cosine, 0.0, None)[..., None] + 0.3 * lobe[..., None]
     lp = write_rti_capture(tmp, "relief", images, lights, scale=0.8)
-    return import_rti(lp, tmp / "relief.zarr", progress=False).path
+    return import_rti(lp, tmp / "relief.zarr").path
 
 
 PIXEL_BYTES = 20 * 3 * 4  # float32 radiance of one pixel under 20 lights

@@ -27,7 +27,7 @@ LOEWENKOPF = LOEWENKOPF_LP.parent
 @pytest.fixture(scope="module")
 def loewenkopf(tmp_path_factory: pytest.TempPathFactory) -> ReflectanceField:
     store = tmp_path_factory.mktemp("rti") / "loewenkopf.zarr"
-    return import_rti(LOEWENKOPF_LP, store, progress=False)
+    return import_rti(LOEWENKOPF_LP, store)
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:
@@ -190,7 +190,7 @@ def test_a_missing_image_is_refused_with_its_line(tmp_path: Path) -> None:
     lp = _small_capture(tmp_path, [(4, 6)] * 3)
     (tmp_path / "img" / "1.png").unlink()
     with pytest.raises(DatasetError, match=r"small\.lp, line 3: image 'img/1\.png' not found"):
-        import_rti(lp, tmp_path / "f.zarr", progress=False)
+        import_rti(lp, tmp_path / "f.zarr")
     assert not (tmp_path / "f.zarr").exists()
 
 
@@ -199,7 +199,7 @@ def test_mixed_image_sizes_are_refused_and_leave_no_store(tmp_path: Path) -> Non
     with pytest.raises(
         DatasetError, match=r"line 4: image 'img/2\.png' is 4x6 pixels, the first .* is 6x4"
     ):
-        import_rti(lp, tmp_path / "f.zarr", progress=False)
+        import_rti(lp, tmp_path / "f.zarr")
     assert not (tmp_path / "f.zarr").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["img", "small.lp"]
 
@@ -208,14 +208,14 @@ def test_a_corrupt_image_is_refused_with_its_line(tmp_path: Path) -> None:
     lp = _small_capture(tmp_path, [(4, 6)] * 2)
     (tmp_path / "img" / "1.png").write_bytes(b"not a png")
     with pytest.raises(DatasetError, match=r"line 3: .*1\.png.*cannot decode"):
-        import_rti(lp, tmp_path / "f.zarr", progress=False)
+        import_rti(lp, tmp_path / "f.zarr")
 
 
 def test_grey_images_become_rgb_and_an_old_store_is_replaced(tmp_path: Path) -> None:
     lp = _small_capture(tmp_path, [(4, 6)] * 3, grey=True)
     store = tmp_path / "f.zarr"
-    import_rti(_small_capture(tmp_path / "other", [(2, 2)]), store, progress=False)
-    field = import_rti(lp, store, dtype="float16", progress=True)
+    import_rti(_small_capture(tmp_path / "other", [(2, 2)]), store)
+    field = import_rti(lp, store, dtype="float16")
     assert field.shape == (1, 3, 24) and field.image_shape == (4, 6)
     assert field.dtype == np.float16
     slab = field.camera_slab(0).astype(np.float32)
@@ -232,11 +232,11 @@ def test_grey_images_become_rgb_and_an_old_store_is_replaced(tmp_path: Path) -> 
 def test_import_refuses_bad_arguments(tmp_path: Path) -> None:
     lp = _small_capture(tmp_path, [(4, 6)] * 2)
     with pytest.raises(InputError, match="float16 or float32"):
-        import_rti(lp, tmp_path / "f.zarr", dtype="float64", progress=False)
+        import_rti(lp, tmp_path / "f.zarr", dtype="float64")
     (tmp_path / "taken").mkdir()
     (tmp_path / "taken" / "notes.txt").write_text("mine", encoding="utf-8")
     with pytest.raises(InputError, match="exists and is not a field store"):
-        import_rti(lp, tmp_path / "taken", progress=False)
+        import_rti(lp, tmp_path / "taken")
     assert (tmp_path / "taken" / "notes.txt").read_text(encoding="utf-8") == "mine"
 
 
@@ -282,7 +282,7 @@ def _images(field: ReflectanceField) -> np.ndarray:
 
 def test_a_16_bit_png_is_linear_by_default_and_srgb_when_asked(tmp_path: Path) -> None:
     lp = _capture(tmp_path, [_flat(13107, np.uint16), _flat(65535, np.uint16)])  # 0.2 and 1.0
-    field = import_rti(lp, tmp_path / "auto.zarr", progress=False)
+    field = import_rti(lp, tmp_path / "auto.zarr")
     images = _images(field)
     np.testing.assert_allclose(images[0], 0.2, rtol=0, atol=1 / 65535)
     np.testing.assert_allclose(images[1], 1.0, rtol=0, atol=1 / 65535)
@@ -290,7 +290,7 @@ def test_a_16_bit_png_is_linear_by_default_and_srgb_when_asked(tmp_path: Path) -
     assert record["requested"] == "auto" and record["applied"] == "linear"
     assert record["bit_depth"] == "16-bit"
     assert "16-bit images decoded as linear" in field.provenance["assumed"]
-    srgb = import_rti(lp, tmp_path / "srgb.zarr", progress=False, transfer="srgb")
+    srgb = import_rti(lp, tmp_path / "srgb.zarr", transfer="srgb")
     np.testing.assert_allclose(_images(srgb)[0], 0.0331048, rtol=1e-5)  # what 0.2 becomes
     assert srgb.provenance["transfer"]["applied"] == "srgb"
     assert "transfer 'srgb' as asked" in srgb.provenance["assumed"]
@@ -300,7 +300,7 @@ def test_a_16_bit_tiff_is_linear_by_default(tmp_path: Path) -> None:
     (tmp_path / "img").mkdir()
     write_linear16_tiff(tmp_path / "img" / "a.tif", _flat(13107, np.uint16))
     (tmp_path / "t.lp").write_text("1\nimg/a.tif 0 0 1\n", encoding="utf-8")
-    field = import_rti(tmp_path / "t.lp", tmp_path / "f.zarr", progress=False)
+    field = import_rti(tmp_path / "t.lp", tmp_path / "f.zarr")
     np.testing.assert_allclose(_images(field), 0.2, rtol=0, atol=1 / 65535)
 
 
@@ -313,13 +313,13 @@ def test_8_bit_levels_are_stored_as_float16_by_default_and_lose_nothing(
     levels = np.arange(256, dtype=np.uint8).reshape(16, 16)
     picture = np.stack([levels, levels.T, 255 - levels], axis=2)
     lp = _capture(tmp_path, [picture, picture[::-1]])
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False, transfer=transfer)  # type: ignore[arg-type]
+    field = import_rti(lp, tmp_path / "f.zarr", transfer=transfer)  # type: ignore[arg-type]
     assert field.dtype == np.float16
     assert "stored as float16 (8-bit levels" in field.provenance["assumed"]
     stored = _images(field)
     # Each level is the float16 of its float32 value, and all 256 are told apart: decoding
     # them back gives every level as it was.
-    wide = import_rti(lp, tmp_path / "g.zarr", progress=False, transfer=transfer, dtype="float32")  # type: ignore[arg-type]
+    wide = import_rti(lp, tmp_path / "g.zarr", transfer=transfer, dtype="float32")  # type: ignore[arg-type]
     assert wide.dtype == np.float32
     np.testing.assert_array_equal(stored, _images(wide).astype(np.float16))
     encoded = linear_to_srgb(stored.astype(np.float32)) if transfer == "srgb" else stored
@@ -330,11 +330,11 @@ def test_8_bit_levels_are_stored_as_float16_by_default_and_lose_nothing(
 
 def test_16_bit_images_and_divided_images_stay_float32(tmp_path: Path) -> None:
     sixteen = _capture(tmp_path / "a", [_flat(13107, np.uint16)] * 3)
-    assert import_rti(sixteen, tmp_path / "a.zarr", progress=False).dtype == np.float32
+    assert import_rti(sixteen, tmp_path / "a.zarr").dtype == np.float32
     divided = _capture(tmp_path / "b", [_flat(100, np.uint8)] * 3, extra=["2", "0.5", "1"])
-    field = import_rti(divided, tmp_path / "b.zarr", progress=False)
+    field = import_rti(divided, tmp_path / "b.zarr")
     assert field.dtype == np.float32 and "stored as float32" in field.provenance["assumed"]
-    asked = import_rti(divided, tmp_path / "c.zarr", progress=False, dtype="float16")
+    asked = import_rti(divided, tmp_path / "c.zarr", dtype="float16")
     assert asked.dtype == np.float16
 
 
@@ -347,7 +347,7 @@ def test_an_image_that_fails_to_decode_ahead_is_named_and_leaves_no_store(
     lp = _capture(tmp_path, images)
     (tmp_path / "img" / "4.png").write_bytes(b"not a png")
     with pytest.raises(DatasetError, match=r"cap\.lp, line 6: .*4\.png"):
-        import_rti(lp, tmp_path / "f.zarr", progress=False)
+        import_rti(lp, tmp_path / "f.zarr")
     assert not (tmp_path / "f.zarr").exists()
     assert not list(tmp_path.glob(".f.zarr.*"))
 
@@ -357,7 +357,7 @@ def test_8_bit_images_are_srgb_by_default_and_linear_when_asked(
     tmp_path: Path, suffix: str
 ) -> None:
     lp = _capture(tmp_path, [_flat(128, np.uint8)] * 2, suffix=suffix)
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False, dtype="float32")
+    field = import_rti(lp, tmp_path / "f.zarr", dtype="float32")
     # 128/255 encoded is 0.2158605 linear (a JPEG of a flat patch keeps the value exactly).
     np.testing.assert_allclose(_images(field), 0.2158605, rtol=1e-6)
     assert field.provenance["transfer"] == {
@@ -367,7 +367,7 @@ def test_8_bit_images_are_srgb_by_default_and_linear_when_asked(
         "first_image": f"img/0{suffix}",
         "rule": "auto: 8-bit is sRGB, 16-bit and float are linear",
     }
-    linear = import_rti(lp, tmp_path / "g.zarr", progress=False, transfer="linear")
+    linear = import_rti(lp, tmp_path / "g.zarr", transfer="linear")
     np.testing.assert_array_equal(_images(linear), np.float16(128 / 255))  # auto: float16
 
 
@@ -387,7 +387,7 @@ def test_the_real_capture_records_what_it_assumed(loewenkopf: ReflectanceField) 
 
 def test_float_images_are_taken_as_stored_whatever_the_transfer(tmp_path: Path) -> None:
     lp = _capture(tmp_path, [_flat(0.2, np.float32), _flat(3.5, np.float32)], suffix=".exr")
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False, transfer="srgb")
+    field = import_rti(lp, tmp_path / "f.zarr", transfer="srgb")
     np.testing.assert_allclose(_images(field)[:, 0, 0], [[0.2] * 3, [3.5] * 3], rtol=1e-7)
     record = field.provenance["transfer"]
     assert record["bit_depth"] == "float" and record["applied"] == "linear"
@@ -402,7 +402,7 @@ def test_mixed_bit_depths_are_refused_naming_the_first_that_differs(tmp_path: Pa
         match=r"cap\.lp, line 4: image 'img/2\.png' is 16-bit, the first \('img/0\.png'\) is "
         r"8-bit",
     ):
-        import_rti(lp, tmp_path / "f.zarr", progress=False)
+        import_rti(lp, tmp_path / "f.zarr")
     assert not (tmp_path / "f.zarr").exists()
     assert not list(tmp_path.glob(".*partial*"))
 
@@ -411,11 +411,11 @@ def test_the_import_prints_what_it_assumed(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     lp = _capture(tmp_path, [_flat(13107, np.uint16)] * 2)
-    field = import_rti(lp, tmp_path / "f.zarr", progress=True)
+    field = import_rti(lp, tmp_path / "f.zarr", print_assumed=True)
     err = capsys.readouterr().err
     assert err.splitlines()[0] == field.provenance["assumed"]
     assert field.provenance["assumed"].startswith("rti cap.lp: 2 16-bit images decoded as linear")
-    import_rti(lp, tmp_path / "f.zarr", progress=False)
+    import_rti(lp, tmp_path / "f.zarr")
     assert capsys.readouterr().err == ""
 
 
@@ -424,7 +424,7 @@ def test_a_bad_transfer_is_refused(tmp_path: Path) -> None:
     with pytest.raises(
         InputError, match=r"transfer must be 'auto', 'srgb' or 'linear', got 'gamma'"
     ):
-        import_rti(lp, tmp_path / "f.zarr", progress=False, transfer="gamma")  # type: ignore[arg-type]
+        import_rti(lp, tmp_path / "f.zarr", transfer="gamma")  # type: ignore[arg-type]
 
 
 def _mask_picture(shape: tuple[int, int] = (4, 6)) -> np.ndarray:
@@ -438,7 +438,7 @@ def test_a_mask_file_sets_the_visibility(tmp_path: Path) -> None:
     lp = _capture(tmp_path, [_flat(100, np.uint8)] * 3)
     mask = _mask_picture()
     assert cv2.imwrite(str(tmp_path / "object.png"), mask)
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False, mask=tmp_path / "object.png")
+    field = import_rti(lp, tmp_path / "f.zarr", mask=tmp_path / "object.png")
     np.testing.assert_array_equal(field.visibility[0], mask.reshape(-1) > 0)
     record = field.provenance["mask"]
     assert record["file"] == str((tmp_path / "object.png").resolve())
@@ -451,7 +451,7 @@ def test_a_mask_file_sets_the_visibility(tmp_path: Path) -> None:
     colour = np.zeros((4, 6, 3), np.uint8)
     colour[2, 3, 1] = 9
     assert cv2.imwrite(str(tmp_path / "colour.png"), colour)
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False, mask=tmp_path / "colour.png")
+    field = import_rti(lp, tmp_path / "f.zarr", mask=tmp_path / "colour.png")
     assert np.flatnonzero(field.visibility[0]).tolist() == [2 * 6 + 3]
 
 
@@ -460,17 +460,17 @@ def test_a_mask_sidecar_is_found_and_an_explicit_mask_wins(tmp_path: Path) -> No
     generic = np.zeros((4, 6), np.uint8)
     generic[0] = 1
     assert cv2.imwrite(str(tmp_path / "mask.png"), generic)
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    field = import_rti(lp, tmp_path / "f.zarr")
     np.testing.assert_array_equal(field.visibility[0], generic.reshape(-1) > 0)
     assert field.provenance["mask"]["found"] == "mask sidecar"
     assert field.provenance["mask"]["file"] == str((tmp_path / "mask.png").resolve())
     specific = _mask_picture()
     assert cv2.imwrite(str(tmp_path / "cap.mask.png"), specific)  # <lp stem>.mask.png first
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    field = import_rti(lp, tmp_path / "f.zarr")
     np.testing.assert_array_equal(field.visibility[0], specific.reshape(-1) > 0)
     explicit = np.ones((4, 6), np.uint8)
     assert cv2.imwrite(str(tmp_path / "all.png"), explicit)
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False, mask=tmp_path / "all.png")
+    field = import_rti(lp, tmp_path / "f.zarr", mask=tmp_path / "all.png")
     assert field.visibility.all() and field.provenance["mask"]["found"] == "mask argument"
     with open_field_or_rti(lp) as opened:  # the sidecar, through the opener too
         np.testing.assert_array_equal(opened.visibility[0], specific.reshape(-1) > 0)
@@ -487,15 +487,15 @@ def test_bad_masks_are_refused_and_leave_no_store(tmp_path: Path) -> None:
         DatasetError,
         match=r"mask argument .*small\.png: 6x3 pixels, the images are 6x4 \(width x height\)",
     ):
-        import_rti(lp, tmp_path / "f.zarr", progress=False, mask=tmp_path / "small.png")
+        import_rti(lp, tmp_path / "f.zarr", mask=tmp_path / "small.png")
     assert cv2.imwrite(str(tmp_path / "cap.mask.png"), np.zeros((4, 6), np.uint8))
     with pytest.raises(DatasetError, match=r"mask sidecar .*cap\.mask\.png: every pixel is zero"):
-        import_rti(lp, tmp_path / "f.zarr", progress=False)
+        import_rti(lp, tmp_path / "f.zarr")
     (tmp_path / "cap.mask.png").write_bytes(b"")
     with pytest.raises(DatasetError, match=r"mask sidecar: .*cap\.mask\.png: the file is empty"):
-        import_rti(lp, tmp_path / "f.zarr", progress=False)
+        import_rti(lp, tmp_path / "f.zarr")
     with pytest.raises(DatasetError, match=r"mask argument: .*none\.png: no such file"):
-        import_rti(lp, tmp_path / "f.zarr", progress=False, mask=tmp_path / "none.png")
+        import_rti(lp, tmp_path / "f.zarr", mask=tmp_path / "none.png")
     assert not (tmp_path / "f.zarr").exists()
 
 
@@ -510,7 +510,7 @@ def test_a_store_refuses_import_options(loewenkopf: ReflectanceField, tmp_path: 
 def test_fifth_column_intensities_divide_the_images(tmp_path: Path) -> None:
     values = [13107, 26214, 39321]  # 0.2, 0.4, 0.6 linear
     lp = _capture(tmp_path, [_flat(v, np.uint16) for v in values], extra=["2", "0.5", "1"])
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    field = import_rti(lp, tmp_path / "f.zarr")
     np.testing.assert_allclose(
         _images(field)[:, 0, 0, 0], [0.2 / 2, 0.4 / 0.5, 0.6 / 1], rtol=0, atol=1 / 65535
     )
@@ -523,7 +523,7 @@ def test_fifth_column_intensities_divide_the_images(tmp_path: Path) -> None:
 def test_mixed_columns_are_refused_at_import_with_the_line(tmp_path: Path) -> None:
     lp = _capture(tmp_path, [_flat(1, np.uint8)] * 3, extra=["2", "", "1"])
     with pytest.raises(DatasetError, match=r"cap\.lp, line 3: 4 columns, but line 2 has 5"):
-        import_rti(lp, tmp_path / "f.zarr", progress=False)
+        import_rti(lp, tmp_path / "f.zarr")
 
 
 def test_sidecar_intensities_divide_the_images(tmp_path: Path) -> None:
@@ -532,7 +532,7 @@ def test_sidecar_intensities_divide_the_images(tmp_path: Path) -> None:
         "# light intensities\r\nimg/2.exr 4\r\n\r\nimg/0.exr 2\r\nimg/1.exr\t0.25\r\n",
         encoding="utf-8",
     )
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    field = import_rti(lp, tmp_path / "f.zarr")
     np.testing.assert_allclose(_images(field)[:, 0, 0, 0], [0.4, 3.2, 0.2], rtol=1e-7)
     record = field.provenance["intensities"]
     assert record["source"] == str((tmp_path / "cap.intensities").resolve())
@@ -545,7 +545,7 @@ def test_sidecar_intensities_divide_the_images(tmp_path: Path) -> None:
         read_intensity_sidecar(tmp_path / "cap.intensities", lights), [2.0, 0.25, 4.0]
     )
     (tmp_path / "cap.intensities").rename(tmp_path / "intensities.txt")  # the generic name
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    field = import_rti(lp, tmp_path / "f.zarr")
     np.testing.assert_allclose(_images(field)[:, 0, 0, 0], [0.4, 3.2, 0.2], rtol=1e-7)
 
 
@@ -572,7 +572,7 @@ def test_bad_intensity_sidecars_are_refused(tmp_path: Path, text: str, match: st
     lp = _capture(tmp_path, [_flat(1, np.uint8)] * 3)
     (tmp_path / "cap.intensities").write_text(text, encoding="utf-8")
     with pytest.raises(DatasetError, match=match) as caught:
-        import_rti(lp, tmp_path / "f.zarr", progress=False)
+        import_rti(lp, tmp_path / "f.zarr")
     assert "cap.intensities" in str(caught.value)
     assert not (tmp_path / "f.zarr").exists()
 
@@ -581,7 +581,7 @@ def test_a_fifth_column_and_a_sidecar_together_are_refused(tmp_path: Path) -> No
     lp = _capture(tmp_path, [_flat(1, np.uint8)] * 2, extra=["1", "2"])
     (tmp_path / "intensities.txt").write_text("img/0.png 1\nimg/1.png 2\n", encoding="utf-8")
     with pytest.raises(DatasetError, match=r"cap\.lp: gives intensities in a fifth column and "):
-        import_rti(lp, tmp_path / "f.zarr", progress=False)
+        import_rti(lp, tmp_path / "f.zarr")
 
 
 def test_tga_and_bmp_captures_import(tmp_path: Path) -> None:
@@ -592,7 +592,7 @@ def test_tga_and_bmp_captures_import(tmp_path: Path) -> None:
     Image.fromarray(pictures[0]).save(tmp_path / "img" / "a.tga", compression="tga_rle")
     assert cv2.imwrite(str(tmp_path / "img" / "b.bmp"), pictures[1][:, :, ::-1])
     (tmp_path / "t.lp").write_text("2\nimg/a.tga 0 0 1\nimg/b.bmp 0.5 0 1\n", encoding="utf-8")
-    field = import_rti(tmp_path / "t.lp", tmp_path / "f.zarr", progress=False, dtype="float32")
+    field = import_rti(tmp_path / "t.lp", tmp_path / "f.zarr", dtype="float32")
     expected = srgb_to_linear(np.array(pictures, dtype=np.float32) / 255.0)
     np.testing.assert_array_equal(_images(field), expected)  # the table is the curve, bit for bit
     assert field.provenance["transfer"]["bit_depth"] == "8-bit"
@@ -604,5 +604,5 @@ def test_an_empty_tga_is_refused_by_name_and_line(tmp_path: Path) -> None:
     (tmp_path / "img" / "b.tga").write_bytes(b"")
     (tmp_path / "t.lp").write_text("2\nimg/a.tga 0 0 1\nimg/b.tga 0.5 0 1\n", encoding="utf-8")
     with pytest.raises(DatasetError, match=r"t\.lp, line 3: .*b\.tga: the file is empty"):
-        import_rti(tmp_path / "t.lp", tmp_path / "f.zarr", progress=False)
+        import_rti(tmp_path / "t.lp", tmp_path / "f.zarr")
     assert not (tmp_path / "f.zarr").exists()

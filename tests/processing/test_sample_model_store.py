@@ -60,7 +60,7 @@ def test_a_point_fit_round_trips(tmp_path: Path) -> None:
 
 
 def test_a_pixel_fit_round_trips(tmp_path: Path) -> None:
-    field = import_rti(RTI, tmp_path / "lion.zarr", progress=False)
+    field = import_rti(RTI, tmp_path / "lion.zarr")
     models = fit_sample_models(field, ["lambert", "ptm"])
     loaded = read_sample_models(write_sample_models(tmp_path / "m.npz", models, field), field)
     _assert_same(models, loaded)

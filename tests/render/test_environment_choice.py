@@ -34,7 +34,7 @@ def _lambertian_capture(folder: Path, lights: int = 49) -> Path:
 def plane(tmp_path_factory: pytest.TempPathFactory) -> ReflectanceField:
     folder = tmp_path_factory.mktemp("plane")
     lp = _lambertian_capture(folder / "capture")
-    return import_rti(lp, folder / "field.zarr", progress=False)
+    return import_rti(lp, folder / "field.zarr")
 
 
 def _white_sky() -> object:
@@ -119,8 +119,9 @@ def test_a_predictor_mode_refuses_a_field_of_points_with_what_to_do(tmp_path: Pa
     from sim.field import field_cameras, simulate_field
 
     cameras = field_cameras(2, "grid", distance=4.0, fov_deg=40.0, width=16, height=16)
-    store = simulate_field(tmp_path / "f.zarr", "diffuse-sphere", lights=6, cameras=cameras,
-                           points=200, progress=False)  # fmt: skip
+    store = simulate_field(
+        tmp_path / "f.zarr", "diffuse-sphere", lights=6, cameras=cameras, points=200
+    )
     with pytest.raises(InputError, match="field of points"):
         PredictorRelightSettings(method="lambert+ggx+residual").open(ReflectanceField.open(store))
 

@@ -193,7 +193,7 @@ def test_tiles_score_what_the_whole_view_predicts_there(capture: Path, tmp_path:
     from render.held_out_lights import held_out_split
     from render.light_prediction import make_predictor
 
-    field = import_rti(capture, tmp_path / "relief.zarr", progress=False)
+    field = import_rti(capture, tmp_path / "relief.zarr")
     whole = held_out_split(field, "every-other")
     assert whole.sample is None and whole.fit.image_shape == (64, 96)
     pair = held_out_split(field, "every-other", max_pixels=1024, side=16)

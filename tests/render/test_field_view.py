@@ -45,7 +45,7 @@ def test_a_field_of_pixels_is_its_one_view_with_its_mask(tmp_path: Path) -> None
     write_uint8(
         tmp_path / "mask.png", np.repeat(np.where(mask, 255, 0).astype(np.uint8)[..., None], 3, 2)
     )
-    field = import_rti(lp, tmp_path / "field.zarr", progress=False, mask=tmp_path / "mask.png")
+    field = import_rti(lp, tmp_path / "field.zarr", mask=tmp_path / "mask.png")
     view = FieldView(field, field.cameras[0])
     assert view.plan is None and view.spacing is None
     assert np.array_equal(view.coverage, mask) and np.array_equal(view.needed, mask.ravel())

@@ -106,7 +106,7 @@ def test_a_field_of_pixels_is_relit_by_the_method_chosen_under_the_panorama(
     shading = 0.6 / np.pi * np.clip(directions[:, 2], 0.0, None)
     images = np.broadcast_to(shading[:, None, None, None], (25, 6, 8, 3))
     lp = write_rti_capture(tmp_path / "capture", "dome", images, directions, scale=1.0)
-    field = import_rti(lp, tmp_path / "field.zarr", progress=False)
+    field = import_rti(lp, tmp_path / "field.zarr")
     panorama = read_panorama(courtyard_path)
     request = RelightRequest(
         panorama=panorama, camera=field.cameras[0], mode=ModeRequest(fast=True)

@@ -31,7 +31,7 @@ def _two_materials(folder: Path) -> ReflectanceField:
     images[:, :, :6] = (0.5 / np.pi * cosine)[:, None, None, None]
     images[:, :, 6:] = (0.1 / np.pi * cosine + lobe)[:, None, None, None]
     lp = write_rti_capture(folder / "capture", "dome", images, LIGHTS, scale=1.0)
-    return import_rti(lp, folder / "field.zarr", progress=False)
+    return import_rti(lp, folder / "field.zarr")
 
 
 def _nearest_degrees(a: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
@@ -98,7 +98,7 @@ def test_a_basis_that_cannot_apply_is_said_and_skipped(tmp_path: Path) -> None:
     directions = hemisphere_layout(12, "fibonacci")
     images = np.broadcast_to((0.3 * directions[:, 2])[:, None, None, None], (12, 4, 4, 3))
     lp = write_rti_capture(tmp_path / "c", "dome", images, directions, scale=1.0)
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    field = import_rti(lp, tmp_path / "f.zarr")
     choice = choose_light_rung(field, candidates=["barycentric", "hsh3"], mix=False)
     hsh = next(s for s in choice.scores if s.name == "hsh3")
     assert hsh.psnr == -np.inf and "terms" in hsh.note

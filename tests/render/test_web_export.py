@@ -114,9 +114,7 @@ def _render(info: dict, values: np.ndarray, light: np.ndarray, pi: float = VIEWE
 
 @pytest.fixture(scope="module")
 def lion(tmp_path_factory: pytest.TempPathFactory) -> ReflectanceField:
-    return import_rti(
-        rti_capture_path(), tmp_path_factory.mktemp("lion") / "f.zarr", progress=False
-    )
+    return import_rti(rti_capture_path(), tmp_path_factory.mktemp("lion") / "f.zarr")
 
 
 @pytest.fixture(scope="module")

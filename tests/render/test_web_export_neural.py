@@ -90,9 +90,7 @@ def _psnr(shown: np.ndarray, reference: np.ndarray) -> float:
 
 @pytest.fixture(scope="module")
 def lion(tmp_path_factory: pytest.TempPathFactory) -> ReflectanceField:
-    return import_rti(
-        rti_capture_path(), tmp_path_factory.mktemp("lion") / "f.zarr", progress=False
-    )
+    return import_rti(rti_capture_path(), tmp_path_factory.mktemp("lion") / "f.zarr")
 
 
 @pytest.fixture(scope="module")
@@ -247,7 +245,7 @@ def test_pixels_outside_the_mask_share_the_code_of_black(
     mask = np.zeros((43, 64), np.uint8)
     mask[:, :40] = 255
     cv2.imwrite(str(tmp_path / "mask.png"), mask)
-    field = import_rti(rti_capture_path(), tmp_path / "f.zarr", progress=False,
+    field = import_rti(rti_capture_path(), tmp_path / "f.zarr",
                        mask=tmp_path / "mask.png")  # fmt: skip
     settings = dataclasses.replace(FIT, steps=1000, holdout=0.0)
     result = export_web(

@@ -24,7 +24,7 @@ def test_a_written_capture_imports_back_in_either_format(
                        for t in range(6)])  # fmt: skip
     lp = write_rti_capture(tmp_path / "cap", "fit", images, directions, scale=1.0,
                            image_format=image_format)  # type: ignore[arg-type]  # fmt: skip
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    field = import_rti(lp, tmp_path / "f.zarr")
     assert field.provenance["transfer"]["bit_depth"] == depth
     got = field.camera_slab(0).reshape(6, 12, 16, 3)
     np.testing.assert_allclose(got, np.clip(images, 0, 1), atol=tolerance)
@@ -40,6 +40,6 @@ def test_the_mask_is_written_where_the_import_finds_it(tmp_path: Path) -> None:
     lp = write_rti_capture(tmp_path, "dome", images, hemisphere_layout(3, "fibonacci"),
                            scale=1.0, mask=mask)  # fmt: skip
     assert lp == tmp_path / "dome.lp" and (tmp_path / "dome.mask.png").is_file()
-    field = import_rti(lp, tmp_path / "f.zarr", progress=False)
+    field = import_rti(lp, tmp_path / "f.zarr")
     np.testing.assert_array_equal(field.visibility[0], mask.ravel())
     assert field.provenance["mask"]["found"] == "mask sidecar"

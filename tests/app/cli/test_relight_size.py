@@ -76,7 +76,7 @@ def test_batch_refuses_a_size_for_a_field_of_pixels(
     from processing.rti import import_rti
 
     store = tmp_path / "lion.zarr"
-    import_rti(RTI / "dirs.lp", store, progress=False)
+    import_rti(RTI / "dirs.lp", store)
     args = ["batch", str(store), "--env", str(courtyard_path), "--sequence", "environment",
             "--size", "640x430", "-o", str(tmp_path / "out.zarr")]  # fmt: skip
     assert main(args) == 2
