@@ -202,12 +202,14 @@ def shade_light(
 
 @numba.njit(cache=True, inline="always")
 def toward_eye(
-    points: NDArray[np.float64], p: int, eye: NDArray[np.float64], distant: bool
+    points: NDArray[np.floating], p: int, eye: NDArray[np.float64], distant: bool
 ) -> Triple:
     """Unit direction from sample ``p`` toward the eye, for the shading kernels.
 
     ``distant``: ``eye`` is that direction already (a pixel field's camera); else the eye's
-    position, and the direction is from ``points[p]`` to it.
+    position, and the direction is from ``points[p]`` to it (float32 points are widened, as
+    ``float()`` would). The one view direction of the shading kernels, the fits' and the
+    camera blend's.
     """
     if distant:
         return eye[0], eye[1], eye[2]

@@ -138,6 +138,8 @@ def project_point(
     return centre_col + focal * cx / safe, centre_row - focal * cy / safe, cz
 
 
+# The camera's numbers one by one on purpose, as core.splat's _splat_geometry takes them:
+# numba kernels take arrays and scalars, not a PinholeCamera.
 @numba.njit(cache=True, parallel=True)
 def _project(
     points: NDArray[np.floating],

@@ -341,6 +341,8 @@ def for_each_cover(
                 break
 
 
+# _count_bands and _fill_bands take the same disks on purpose: the first pass sizes each
+# band, the second fills it in the room made; numba kernels take arrays, not CameraDisks.
 @numba.njit(cache=True, parallel=True)
 def _count_bands(
     cols: NDArray[np.float64],
@@ -365,6 +367,7 @@ def _count_bands(
                     cells[chunk, band] += (hi - lo + 1) * (j1 - j0 + 1)
 
 
+# The disks of _count_bands again, on purpose (the note there).
 @numba.njit(cache=True, parallel=True)
 def _fill_bands(
     cols: NDArray[np.float64],
@@ -391,6 +394,8 @@ def _fill_bands(
                     cursor[chunk, band] = k + 1
 
 
+# The camera's numbers one by one on purpose, as core.camera_model's _project takes them:
+# numba kernels take arrays and scalars, not a PinholeCamera.
 @numba.njit(cache=True, parallel=True)
 def _splat_geometry(
     points: NDArray[np.floating],

@@ -104,6 +104,8 @@ __all__ = [
     "viewer_of",
 ]
 
+# Choices as a Literal and its get_args tuple, as processing.environment's Lighting: the
+# project's one idiom for a closed set of names (the type checks callers, the tuple inputs).
 ModelLightingMode = Literal["sampled", "grid", "precomputed"]
 #: How an environment lights the models: K sampled lights, a pre-filtered grid summed exactly,
 #: or the grid's sum split into precomputed terms, interactive
@@ -271,6 +273,8 @@ def relight_models(
     return out
 
 
+# The fit's and the lights' arrays one by one on purpose, as shade_precomputed takes them:
+# numba kernels take arrays and scalars, not a ParametricFit or a ModelLighting.
 @numba.njit(cache=True, parallel=True)
 def _shade_kernel(
     samples: NDArray[np.int64],

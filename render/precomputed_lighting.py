@@ -316,6 +316,8 @@ class SampleTransfer:
     visibility: NDArray[np.float32]
 
 
+# Arrays one by one on purpose: numba kernels take arrays and scalars, not the fit and the
+# interpolation weights that hold them.
 @numba.njit(cache=True, parallel=True)
 def _transfer(
     normals: NDArray[np.float64],
@@ -331,17 +333,14 @@ def _transfer(
 ) -> None:
     for p in numba.prange(normals.shape[0]):
         q = source[p]
+        normal = (normals[p, 0], normals[p, 1], normals[p, 2])
         for g in range(directions.shape[0]):
             v = 0.0
             for k in range(indices.shape[1]):
                 v += weights[g, k] * lit[q, indices[g, k]]
             if v <= 0.0:
                 continue
-            cos = (
-                normals[p, 0] * directions[g, 0]
-                + normals[p, 1] * directions[g, 1]
-                + normals[p, 2] * directions[g, 2]
-            )
+            cos = cosine(normal, (directions[g, 0], directions[g, 1], directions[g, 2]))
             for b in range(basis.shape[1]):
                 visibility[p, b] += v * basis[g, b] * omega[g]
                 if cos > 0.0:
@@ -404,6 +403,8 @@ def _bilinear(
     return top * (1.0 - fr) + bottom * fr
 
 
+# The fit's arrays one by one on purpose, as render.model_relight's kernel takes them: numba
+# kernels take arrays and scalars, not a ParametricFit, a SampleTransfer or a prefilter.
 @numba.njit(cache=True, parallel=True)
 def shade_precomputed(
     samples: NDArray[np.int64],
@@ -450,7 +451,7 @@ def shade_precomputed(
             q = source[p]
             nx, ny, nz = normals[p, 0], normals[p, 1], normals[p, 2]
             vx, vy, vz = toward_eye(points, p, eye, distant)
-            cos_o = nx * vx + ny * vy + nz * vz
+            cos_o = cosine((nx, ny, nz), (vx, vy, vz))
             if cos_o <= 0.0:
                 continue
             e_r = e_g = e_b = 0.0

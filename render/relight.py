@@ -20,6 +20,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from core.brdf import cosine, toward_eye
 from core.camera_model import PinholeCamera
 from core.directions import panorama_directions, panorama_solid_angles
 from core.errors import InputError
@@ -138,9 +139,7 @@ def _sphere_crossings(
     for q in numba.prange(index.shape[0]):
         p = index[q]
         x, y, z = float(points[p, 0]), float(points[p, 1]), float(points[p, 2])
-        rx, ry, rz = eye[0] - x, eye[1] - y, eye[2] - z
-        length = math.sqrt(rx * rx + ry * ry + rz * rz)
-        rx, ry, rz = rx / length, ry / length, rz / length
+        rx, ry, rz = toward_eye(points, p, eye, False)
         along = x * rx + y * ry + z * rz
         reach = along * along - (x * x + y * y + z * z) + radius * radius
         if reach < 0.0:
@@ -152,6 +151,7 @@ def _sphere_crossings(
         out[q, 0], out[q, 1], out[q, 2] = cx / norm, cy / norm, cz / norm
 
 
+# Arrays one by one on purpose: numba kernels take arrays, not the field and the weights.
 @numba.njit(cache=True, parallel=True)
 def _keep_seen(
     indices: NDArray[np.int64],
@@ -176,15 +176,12 @@ def _keep_seen(
             total += weights[q, j]
         if total <= 0.0:
             best, nearest = -np.inf, -1
+            toward = (towards[q, 0], towards[q, 1], towards[q, 2])
             for c in range(cameras.shape[0]):
                 if visibility[c, p]:
-                    cosine = (
-                        towards[q, 0] * cameras[c, 0]
-                        + towards[q, 1] * cameras[c, 1]
-                        + towards[q, 2] * cameras[c, 2]
-                    )
-                    if cosine > best:
-                        best, nearest = cosine, c
+                    cos = cosine(toward, (cameras[c, 0], cameras[c, 1], cameras[c, 2]))
+                    if cos > best:
+                        best, nearest = cos, c
             if nearest < 0:
                 holes[p] = True
                 continue
@@ -343,6 +340,7 @@ def relight_pixels_literal(
     return out
 
 
+# Arrays one by one on purpose: numba kernels take arrays, not the field and the weights.
 @numba.njit(cache=True, parallel=True)
 def _literal_eq2(
     normals: NDArray[np.float64],
@@ -354,13 +352,9 @@ def _literal_eq2(
     out: NDArray[np.float64],
 ) -> None:
     for p in numba.prange(normals.shape[0]):
+        normal = (normals[p, 0], normals[p, 1], normals[p, 2])
         for q in range(directions.shape[0]):
-            if (
-                normals[p, 0] * directions[q, 0]
-                + normals[p, 1] * directions[q, 1]
-                + normals[p, 2] * directions[q, 2]
-                <= 0.0
-            ):
+            if cosine(normal, (directions[q, 0], directions[q, 1], directions[q, 2])) <= 0.0:
                 continue
             for j in range(indices.shape[1]):
                 w = weights[q, j]

@@ -167,6 +167,8 @@ def _plan_band(
     return int(next_record[0]) - first
 
 
+# The bands' and the records' arrays one by one on purpose: numba kernels take arrays, not
+# dataclasses, and a tuple of arrays passed into a prange body loses its writes.
 @numba.njit(cache=True, parallel=True)
 def _plan(
     start: NDArray[np.int64],
@@ -192,6 +194,7 @@ def _plan(
         )  # fmt: skip
 
 
+# The plan's arrays one by one on purpose: numba kernels take arrays, not a SplatPlan.
 @numba.njit(cache=True, parallel=True)
 def _splat(
     record_start: NDArray[np.int64],

@@ -108,6 +108,8 @@ def render_environment(
     return image_of_points(samples, camera, radiance)
 
 
+# The samples' arrays one by one on purpose, as sim.synthetic_camera's kernel takes them:
+# numba kernels take arrays and scalars, not SurfaceSamples or a LightSet.
 @numba.njit(cache=True, parallel=True)
 def _shade(
     points: NDArray[np.float64],

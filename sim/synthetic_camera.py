@@ -185,6 +185,8 @@ def shade_points(
     return out
 
 
+# The samples' arrays one by one on purpose, as sim.ground_truth's kernel takes them: numba
+# kernels take arrays and scalars, not SurfaceSamples.
 @numba.njit(cache=True, parallel=True)
 def _shade_one_light(
     points: NDArray[np.float64],

@@ -9,7 +9,12 @@ Why: numba's ``cache=True`` invalidates a cached kernel only when its own source
 not when a jitted function or a global constant it calls from another file does. Keeping every
 kernel and the constants they compile in here means an edit to any of them recompiles the whole
 kernel instead of running a stale cache.
-(``core.brdf.specular_lobe`` is the one jitted callee outside this file.)
+(``core.brdf``'s lobe, cosines and view direction are the jitted callees outside this file:
+they are the one definition the shading kernels share; an edit there wants the cache cleared.)
+
+The kernels pass a sample's observations as separate arrays (cosines, light of each, values),
+so their argument lists repeat one another on purpose: numba kernels take arrays and scalars,
+not the objects one would group them in.
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from core.brdf import specular_lobe
+from core.brdf import cosine, half_vector_cosine, specular_lobe, toward_eye
 
 __all__ = ["fit_samples"]
 
@@ -65,23 +70,20 @@ def _geometry(
 ) -> None:
     # Cosines of every observation for one normal; cos_i = 0 marks an observation the model
     # predicts 0 (light or view behind the surface).
+    n = (normal[0], normal[1], normal[2])
     for k in range(light_of.shape[0]):
         t, s = light_of[k], view_of[k]
-        ci = normal[0] * lights[t, 0] + normal[1] * lights[t, 1] + normal[2] * lights[t, 2]
-        co = normal[0] * views[s, 0] + normal[1] * views[s, 1] + normal[2] * views[s, 2]
+        light = (lights[t, 0], lights[t, 1], lights[t, 2])
+        view = (views[s, 0], views[s, 1], views[s, 2])
+        ci, co = cosine(n, light), cosine(n, view)
         if ci <= 0.0 or co <= 0.0:
             cos_i[k] = cos_o[k] = cos_h[k] = 0.0
             continue
-        hx, hy, hz = (
-            lights[t, 0] + views[s, 0],
-            lights[t, 1] + views[s, 1],
-            lights[t, 2] + views[s, 2],
-        )
-        length = math.sqrt(hx * hx + hy * hy + hz * hz)
         cos_i[k], cos_o[k] = ci, co
-        cos_h[k] = (normal[0] * hx + normal[1] * hy + normal[2] * hz) / max(length, 1e-300)
+        cos_h[k] = half_vector_cosine(n, light, view)
 
 
+# Observations as separate arrays, as every kernel here takes them (module doc).
 @numba.njit(cache=True)
 def _objective(
     alpha: float,
@@ -133,6 +135,7 @@ def _objective(
     return total
 
 
+# Observations as separate arrays, as every kernel here takes them (module doc).
 @numba.njit(cache=True)
 def _best_alpha(
     grid: NDArray[np.float64],
@@ -179,6 +182,7 @@ def _best_alpha(
     return alpha, value
 
 
+# Observations as separate arrays, as every kernel here takes them (module doc).
 @numba.njit(cache=True)
 def _light_sums(
     alpha: float,
@@ -253,6 +257,7 @@ def _shadow_marks(
     return changed
 
 
+# Observations as separate arrays, as every kernel here takes them (module doc).
 @numba.njit(cache=True)
 def _fit_with_shadows(
     grid: NDArray[np.float64],
@@ -287,6 +292,7 @@ def _fit_with_shadows(
     return alpha, value
 
 
+# Observations as separate arrays, as every kernel here takes them (module doc).
 @numba.njit(cache=True)
 def _refine_normal(
     normal: NDArray[np.float64],
@@ -389,6 +395,7 @@ def _leave_one_out(
     return loo, energy
 
 
+# The chunk's arrays one by one, as fit_samples hands them on (the note there).
 @numba.njit(cache=True)
 def _fit_sample(
     p: int,
@@ -433,14 +440,7 @@ def _fit_sample(
     for s in range(s_count):
         if not seen[p, s]:
             continue
-        if distant:
-            views[s] = eyes[s]
-        else:
-            vx = eyes[s, 0] - points[p, 0]
-            vy = eyes[s, 1] - points[p, 1]
-            vz = eyes[s, 2] - points[p, 2]
-            length = math.sqrt(vx * vx + vy * vy + vz * vz)
-            views[s, 0], views[s, 1], views[s, 2] = vx / length, vy / length, vz / length
+        views[s, 0], views[s, 1], views[s, 2] = toward_eye(points, p, eyes[s], distant)
         for t in range(t_count):
             light_of[k], view_of[k] = t, s
             for c in range(3):
