@@ -50,7 +50,7 @@ from dataclasses import dataclass
 from functools import partial
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from aiohttp import WSMsgType, web
 
@@ -86,8 +86,14 @@ MAX_UPLOAD_BYTES = 256 * 1024 * 1024
 MAX_NAME_BYTES = 255
 #: The first byte of each binary WebSocket message: which picture follows.
 PICTURE_TAGS = {"frame": 1, "panorama": 2, "truth": 3, "error": 4}
+#: What a route of the light view answers (404) over a field of points.
+NO_LIGHT_VIEW = "a field of points has no directional light view"
 _WEB = "web"
 _SUFFIXES = {".exr", ".hdr", ".png", ".jpg", ".jpeg", ".tif", ".tiff"}
+#: A light asked of the light view: a direction (x, y, z) in the camera frame.
+_Light = tuple[float, float, float]
+_Part = TypeVar("_Part", CapturedLight, ChosenLight)
+_Drawn = TypeVar("_Drawn")
 
 
 def _page_file(name: str) -> bytes:
@@ -279,7 +285,7 @@ async def _static(request: web.Request) -> web.Response:
 async def _light(request: web.Request) -> web.Response:
     light = request.app[VIEWER].light
     if light is None:
-        raise _error(web.HTTPNotFound, "a field of points has no directional light view")
+        raise _error(web.HTTPNotFound, NO_LIGHT_VIEW)
     viewer = request.app[VIEWER]
     chosen, captured = viewer.chosen, viewer.captured
     assert chosen is not None and captured is not None  # made with the light view
@@ -297,39 +303,38 @@ async def _light(request: web.Request) -> web.Response:
     })  # fmt: skip
 
 
-async def _captured_picture(request: web.Request) -> web.Response:
-    viewer = request.app[VIEWER]
-    if viewer.captured is None:
-        raise _error(web.HTTPNotFound, "a field of points has no directional light view")
+def _asked_light(request: web.Request, part: _Part | None) -> tuple[_Part, _Light]:
+    """The light view's ``part`` a picture is asked of, and the light ``?x=X&y=Y&z=Z``."""
+    if part is None:
+        raise _error(web.HTTPNotFound, NO_LIGHT_VIEW)
     try:
         x, y, z = (float(request.query[axis]) for axis in "xyz")
     except (KeyError, ValueError):
         raise _error(web.HTTPBadRequest, "send the light as ?x=X&y=Y&z=Z (numbers)") from None
-    # Not on the light worker: this picture is what the page shows while that one works.
-    loop = asyncio.get_running_loop()
+    return part, (x, y, z)
+
+
+async def _drawn(executor: ThreadPoolExecutor | None, draw: Callable[[], _Drawn]) -> _Drawn:
+    """``draw()`` run on ``executor`` (None: the loop's default); the project's errors are 400."""
     try:
-        png, index = await loop.run_in_executor(None, viewer.captured.picture, (x, y, z))
+        return await asyncio.get_running_loop().run_in_executor(executor, draw)
     except RigError as error:
         raise _error(web.HTTPBadRequest, str(error)) from None
+
+
+async def _captured_picture(request: web.Request) -> web.Response:
+    captured, light = _asked_light(request, request.app[VIEWER].captured)
+    # Not on the light worker: this picture is what the page shows while that one works.
+    png, index = await _drawn(None, partial(captured.picture, light))
     return web.Response(body=png, content_type="image/png", headers={"X-Light": str(index)})
 
 
 async def _chosen_picture(request: web.Request) -> web.Response:
     viewer = request.app[VIEWER]
-    if viewer.chosen is None:
-        raise _error(web.HTTPNotFound, "a field of points has no directional light view")
-    try:
-        x, y, z = (float(request.query[axis]) for axis in "xyz")
-    except (KeyError, ValueError):
-        raise _error(web.HTTPBadRequest, "send the light as ?x=X&y=Y&z=Z (numbers)") from None
-    loop = asyncio.get_running_loop()
-    try:
-        png = await loop.run_in_executor(
-            viewer.light_worker,
-            partial(viewer.chosen.picture, (x, y, z), check=viewer.check_running),
-        )
-    except RigError as error:
-        raise _error(web.HTTPBadRequest, str(error)) from None
+    chosen, light = _asked_light(request, viewer.chosen)
+    png = await _drawn(
+        viewer.light_worker, partial(chosen.picture, light, check=viewer.check_running)
+    )
     return web.Response(body=png, content_type="image/png")
 
 

@@ -27,15 +27,19 @@ import shutil
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from core.memory_budget import format_size, parse_size
 
-__all__ = ["main", "run_stage"]
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+__all__ = ["cost_and_memory_chart", "main", "run_stage"]
 
 SCENE = "glossy-sphere"
 VIEW = "30,50"
@@ -286,31 +290,53 @@ def _sweep_table(estimate: list[dict[str, Any]], machines: tuple[int, ...] = (1,
     return "\n".join(lines)
 
 
-def _chart(results: list[dict[str, Any]], path: Path) -> None:
+def cost_and_memory_chart(
+    path: Path,
+    draw: Callable[[Axes, Axes], None],
+    size_label: str,
+    cost: tuple[str, str],
+    memory: tuple[str, str],
+) -> None:
+    """A scale benchmark's chart: cost (left) and peak memory (right) against size, log-log.
+
+    ``draw`` plots the lines on the two panels; ``cost`` and ``memory`` are each panel's
+    y label and title. Shared with :mod:`bench.scale_rti`, so the two charts read alike.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    sizes = [row["points"] for row in results]
-    figure, (cost, memory) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for name in results[0]["stages"]:
-        cost.plot(sizes, [r["stages"][name]["seconds"] for r in results], "o-", label=name)
-        peak = [r["stages"][name]["peak_bytes"] / 2**30 for r in results]
-        memory.plot(sizes, peak, "o-", label=name)
-    workers = [max(r["stages"]["fit on cluster"]["worker_peak_bytes"]) / 2**30 for r in results]
-    memory.plot(sizes, workers, "s--", label="fit on cluster: largest worker")
-    memory.plot(sizes, [r["field_bytes"] / 2**30 for r in results], "k:", label="the field")
-    cost.set(xscale="log", yscale="log", xlabel="samples", ylabel="wall time (s)",
-             title="cost against size")  # fmt: skip
-    memory.set(xscale="log", yscale="log", xlabel="samples", ylabel="peak resident memory (GiB)",
-               title="peak memory per process against size")  # fmt: skip
-    for axes in (cost, memory):
+    figure, (cost_axes, memory_axes) = plt.subplots(1, 2, figsize=(11, 4.2))
+    draw(cost_axes, memory_axes)
+    for axes, (ylabel, title) in ((cost_axes, cost), (memory_axes, memory)):
+        axes.set(xscale="log", yscale="log", xlabel=size_label, ylabel=ylabel, title=title)
         axes.grid(True, which="both", alpha=0.3)
         axes.legend(fontsize=8)
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
+
+
+def _chart(results: list[dict[str, Any]], path: Path) -> None:
+    sizes = [row["points"] for row in results]
+
+    def draw(cost: Axes, memory: Axes) -> None:
+        for name in results[0]["stages"]:
+            cost.plot(sizes, [r["stages"][name]["seconds"] for r in results], "o-", label=name)
+            peak = [r["stages"][name]["peak_bytes"] / 2**30 for r in results]
+            memory.plot(sizes, peak, "o-", label=name)
+        workers = [max(r["stages"]["fit on cluster"]["worker_peak_bytes"]) / 2**30 for r in results]
+        memory.plot(sizes, workers, "s--", label="fit on cluster: largest worker")
+        memory.plot(sizes, [r["field_bytes"] / 2**30 for r in results], "k:", label="the field")
+
+    cost_and_memory_chart(
+        path,
+        draw,
+        "samples",
+        cost=("wall time (s)", "cost against size"),
+        memory=("peak resident memory (GiB)", "peak memory per process against size"),
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -33,13 +33,17 @@ import shutil
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from bench.process_watch import run_watched
+from bench.scale import cost_and_memory_chart
 from core.errors import InputError
 from core.memory_budget import format_size, parse_size
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 __all__ = ["ASPECT", "capture_size", "main", "make_rti_capture"]
 
@@ -311,33 +315,28 @@ def _table(results: list[dict[str, Any]], bound: int) -> str:
 
 
 def _chart(results: list[dict[str, Any]], path: Path, bound: int) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     sizes = [row["megapixels"] for row in results]
-    figure, (cost, memory) = plt.subplots(1, 2, figsize=(11, 4.2))
     names = [n for n in STAGES if any(n in row["stages"] for row in results)]
-    for name in names:
-        rows = [row for row in results if name in row["stages"]]
-        x = [row["megapixels"] for row in rows]
-        cost.plot(x, [r["stages"][name]["seconds_per_megapixel"] for r in rows], "o-", label=name)
-        memory.plot(x, [r["stages"][name]["peak_bytes"] / 2**30 for r in rows], "o-",
-                    label=name)  # fmt: skip
-    memory.axhline(bound / 2**30, color="k", linestyle="--", label="the bound")
-    memory.plot(sizes, [r["float32_bytes"] / 2**30 for r in results], "k:",
-                label="the capture in float32")  # fmt: skip
-    cost.set(xscale="log", yscale="log", xlabel="megapixels", ylabel="seconds per megapixel",
-             title="time per megapixel")  # fmt: skip
-    memory.set(xscale="log", yscale="log", xlabel="megapixels", ylabel="peak resident (GiB)",
-               title="peak memory of each stage's process")  # fmt: skip
-    for axes in (cost, memory):
-        axes.grid(True, which="both", alpha=0.3)
-        axes.legend(fontsize=8)
-    figure.tight_layout()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+
+    def draw(cost: Axes, memory: Axes) -> None:
+        for name in names:
+            rows = [row for row in results if name in row["stages"]]
+            x = [row["megapixels"] for row in rows]
+            per_megapixel = [r["stages"][name]["seconds_per_megapixel"] for r in rows]
+            cost.plot(x, per_megapixel, "o-", label=name)
+            memory.plot(x, [r["stages"][name]["peak_bytes"] / 2**30 for r in rows], "o-",
+                        label=name)  # fmt: skip
+        memory.axhline(bound / 2**30, color="k", linestyle="--", label="the bound")
+        memory.plot(sizes, [r["float32_bytes"] / 2**30 for r in results], "k:",
+                    label="the capture in float32")  # fmt: skip
+
+    cost_and_memory_chart(
+        path,
+        draw,
+        "megapixels",
+        cost=("seconds per megapixel", "time per megapixel"),
+        memory=("peak resident (GiB)", "peak memory of each stage's process"),
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

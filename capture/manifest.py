@@ -59,6 +59,7 @@ _MANIFEST_KEYS = (
 #: dataset's identity, written into every run of its journal and every image it stores, so a
 #: journal, a manifest or an image of another dataset shows; absent in datasets made before.
 _OPTIONAL_MANIFEST_KEYS = ("journaled", "dataset_id")
+#: tests/capture/test_dataset.py spells this list out again on purpose: it pins the format.
 _RECORD_KEYS = (
     "kind",
     "camera_index",

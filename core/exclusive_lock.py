@@ -125,6 +125,8 @@ class ExclusiveLock:
             self._file.close()
             self._file = None
 
+    # The context-manager protocol with its typed signature, alike in shape to every device's
+    # (duplicates pairs it with rig.hardware.Rig's); entering and leaving differ in each.
     def __enter__(self) -> ExclusiveLock:
         self.acquire()
         return self

@@ -26,7 +26,7 @@ in ``problems``. See ``docs/calibration.md``.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Container, Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, Literal
@@ -158,6 +158,25 @@ def _image(dataset: Dataset, records: Sequence[ImageRecord]) -> tuple[NDArray[An
         if decoded.saturated.any(axis=2).mean() < 0.005:
             return decoded.linear, record
     return decode_image(dataset.image_path(ordered[0])).linear, ordered[0]
+
+
+def _light_images(
+    dataset: Dataset,
+    captures: dict[int, tuple[int, int | None, list[ImageRecord]]],
+    intrinsics: Intrinsics,
+    poses: Sequence[CameraPose],
+    solved: Container[int],
+) -> Iterator[tuple[int, NDArray[Any], ImageRecord, CalibratedCamera]]:
+    """Each plan light's calibration image: light index, best image, its record, its camera.
+
+    A capture under no plan light, or of a light already in ``solved``, is passed over;
+    ``solved`` is looked up as each capture comes, so it may grow while this runs.
+    """
+    for camera_index, light_index, records in captures.values():
+        if light_index is None or light_index in solved:
+            continue
+        image, record = _image(dataset, records)
+        yield light_index, image, record, CalibratedCamera(intrinsics, poses[camera_index])
 
 
 def _attempt(problems: list[str], what: str, solve: Callable[[], Any]) -> Any:
@@ -301,11 +320,9 @@ def _lights(
     ]
     errors: dict[int, float] = {}
     measured: set[int] = set()
-    for camera_index, light_index, records in spheres.values():
-        if light_index is None or light_index in measured:
-            continue
-        image, record = _image(dataset, records)
-        camera = CalibratedCamera(intrinsics, poses[camera_index])
+    for light_index, image, record, camera in _light_images(
+        dataset, spheres, intrinsics, poses, measured
+    ):
         directions = _attempt(
             problems,
             f"light {light_index}",
@@ -340,11 +357,9 @@ def _intensities(
 ) -> dict[int, tuple[float | None, float | None]]:
     """Light index to (relative intensity, falloff exponent) from the white-target images."""
     irradiance: dict[int, tuple[float, float | None]] = {}
-    for camera_index, light_index, records in whites.values():
-        if light_index is None or light_index in irradiance:
-            continue
-        image, record = _image(dataset, records)
-        camera = CalibratedCamera(intrinsics, poses[camera_index])
+    for light_index, image, record, camera in _light_images(
+        dataset, whites, intrinsics, poses, irradiance
+    ):
         result = _attempt(
             problems,
             f"light {light_index} intensity",

@@ -49,6 +49,8 @@ from __future__ import annotations
 # neighbour roles, no swapping).  The integers are NOT normalised to a common
 # divisor: each row has its own sum (18 for level 0, ~1e5..2e6 for the others).
 # Length: 128 (verified programmatically).
+# Its rows share a shape with OSTROMOUKHOV_COEFFICIENTS' (duplicates pairs them): both are the
+# sources' numbers transcribed as they stand, so each can be checked against its own source.
 # ---------------------------------------------------------------------------
 TMED_COEFFICIENTS: tuple[tuple[int, int, int, int], ...] = (
     (13, 0, 5, 18),  # 0
@@ -325,6 +327,7 @@ TMED_THRESHOLD_MODULATION: tuple[int, ...] = (
 # The author stores all 256 levels explicitly; the table is exactly mirror
 # symmetric: entry[L] == entry[255 - L] (so 127 and 128 are both (4, 1, 1, 6)).
 # Length: 256 (verified programmatically).
+# Alike in shape to TMED_COEFFICIENTS' rows, on purpose: transcribed data (see that table).
 # ---------------------------------------------------------------------------
 OSTROMOUKHOV_COEFFICIENTS: tuple[tuple[int, int, int, int], ...] = (
     (13, 0, 5, 18),  # 0

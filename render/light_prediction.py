@@ -38,16 +38,16 @@ method                      what predicts the unmeasured light
 ==========================  ===============================================================
 
 Each method's predictor is :mod:`render.prediction_methods`'s, the RTI tools' fits
-:mod:`render.rti_fits`'s; here are the names (:data:`PREDICTORS`), :func:`make_predictor`,
-the sum of a predictor under many lights (:func:`environment_radiance`) and how a learned
-predictor trained (:func:`training_summary`).
+:mod:`render.rti_fits`'s; here are the names (:data:`PREDICTORS`, kept in
+:mod:`core.predictor_names` so that ``rig``'s parsers offer them without importing the
+library), :func:`make_predictor`, the sum of a predictor under many lights
+(:func:`environment_radiance`) and how a learned predictor trained (:func:`training_summary`).
 """
 
 from __future__ import annotations
 
 import math
 import weakref
-from typing import Literal, get_args
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,6 +55,7 @@ from numpy.typing import NDArray
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
+from core.predictor_names import PREDICTORS, PredictorName
 from processing.interpolation import InterpolationMethod, interpolation_weights
 from processing.learned_rti_training import TrainingSettings
 from processing.sample_model_store import models_for_field
@@ -81,27 +82,6 @@ __all__ = [
     "training_summary",
 ]
 
-PredictorName = Literal[
-    "nearest",
-    "barycentric",
-    "rbf",
-    "ptm",
-    "hsh2",
-    "hsh3",
-    "ptm-8bit",
-    "hsh2-8bit",
-    "hsh3-8bit",
-    "lambert",
-    "lambert+ggx",
-    "lambert+residual",
-    "lambert+ggx+residual",
-    "adaptive",
-    "learned",
-    "learned+residual",
-    "light-stage+lambert+ggx",
-]
-#: Every method, the baselines first.
-PREDICTORS: tuple[PredictorName, ...] = get_args(PredictorName)
 
 #: Bytes of predictions :func:`environment_radiance` holds at once (lights x samples x RGB).
 BATCH_BYTES = 256 * 2**20

@@ -295,6 +295,8 @@ class Rig:
             raise
         self._connected = True
 
+    # The context-manager protocol, alike in shape to core.exclusive_lock's (duplicates pairs
+    # them): connecting and a close that says its failures are the Rig's own.
     def __enter__(self) -> Rig:
         self.connect()
         return self

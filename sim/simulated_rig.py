@@ -149,6 +149,8 @@ class SimulatedRig:
             rig.camera = simulated_camera(rig)
         return rig
 
+    # The context-manager protocol (leaving closes), alike in shape to the emulators' (see
+    # sim/dynamixel/emulator.py): Python's protocol, no logic worth a shared base class.
     def __enter__(self) -> SimulatedRig:
         return self
 

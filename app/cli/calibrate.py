@@ -19,6 +19,8 @@ __all__ = ["add_calibrate"]
 
 def add_calibrate(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``rig calibrate DATASET`` on the ``rig`` sub-command set."""
+    # Spelled out call by call, like every command's parser (duplicates pairs them by shape):
+    # the options read here as --help prints them; those shared are app.cli.args' add_*.
     p = commands.add_parser(
         "calibrate",
         help="solve a dataset's calibration captures (ChArUco, mirror sphere, white target)",

@@ -9,6 +9,10 @@ name added to the library and not here fails that test rather than going unoffer
 
 from __future__ import annotations
 
+#: :data:`render.light_prediction.PREDICTORS`: the methods that predict an unmeasured light;
+#: the list is core's, read by the library and the parsers alike, so it is not restated here.
+from core.predictor_names import PREDICTORS
+
 __all__ = [
     "CHOSEN",
     "INTERPOLATIONS",
@@ -33,27 +37,6 @@ INTERPOLATIONS = ("paper", "nearest", "barycentric", "rbf")
 
 #: :data:`processing.sample_models.MODELS`: the per-sample models.
 MODELS = ("lambert", "lambert+ggx", "ptm", "hsh2", "hsh3")
-
-#: :data:`render.light_prediction.PREDICTORS`: the methods that predict an unmeasured light.
-PREDICTORS = (
-    "nearest",
-    "barycentric",
-    "rbf",
-    "ptm",
-    "hsh2",
-    "hsh3",
-    "ptm-8bit",
-    "hsh2-8bit",
-    "hsh3-8bit",
-    "lambert",
-    "lambert+ggx",
-    "lambert+residual",
-    "lambert+ggx+residual",
-    "adaptive",
-    "learned",
-    "learned+residual",
-    "light-stage+lambert+ggx",
-)
 
 #: :data:`render.evaluation.CHOSEN`: the automatic choices ``rig evaluate`` also scores.
 CHOSEN = ("auto", "auto-fast")

@@ -26,6 +26,8 @@ __all__ = ["add_fit"]
 
 def add_fit(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``rig fit FIELD`` on the ``rig`` sub-command parser."""
+    # Spelled out call by call, like every command's parser (duplicates pairs them by shape):
+    # the options read here as --help prints them; those shared are app.cli.args' add_*.
     p = commands.add_parser(
         "fit",
         help="fit the per-sample models of a field store (bounded memory; --dask for a cluster)",

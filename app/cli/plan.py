@@ -20,6 +20,8 @@ __all__ = ["add_plan", "format_duration", "plan_report"]
 
 def add_plan(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``rig plan`` on the ``rig`` sub-command parser."""
+    # Spelled out call by call, like every command's parser (duplicates pairs them by shape):
+    # the options read here as --help prints them; those shared are app.cli.args' add_*.
     p = commands.add_parser(
         "plan",
         help="dry-run a sweep plan: counts, estimated duration, limit checks",

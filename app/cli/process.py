@@ -28,6 +28,8 @@ __all__ = ["add_process"]
 
 def add_process(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``rig process DATASET -o FIELD`` on the ``rig`` sub-command set."""
+    # Spelled out call by call, like every command's parser (duplicates pairs them by shape):
+    # the options read here as --help prints them; those shared are app.cli.args' add_*.
     p = commands.add_parser(
         "process",
         help="build a reflectance field store from a capture dataset",

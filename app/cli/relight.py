@@ -45,6 +45,8 @@ __all__ = ["add_relight"]
 
 def add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``rig relight`` on the ``rig`` sub-command parser."""
+    # Spelled out call by call, like every command's parser (duplicates pairs them by shape):
+    # the options read here as --help prints them; those shared are app.cli.args' add_*.
     p = commands.add_parser(
         "relight",
         help="relight a reflectance field under a panorama",

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal, get_args
 
+# Names, then a Literal and its values: render.live_session's head has the same shape
+# (duplicates pairs them), but they share no logic, only Python's way of listing names.
 __all__ = [
     "ARRAYS",
     "BELOW_HORIZON",

@@ -97,6 +97,8 @@ class ServoChainEmulator:
         """The pty device path the SDK opens."""
         return self._port
 
+    # The context-manager protocol (leaving closes), alike in shape to SimulatedRig's and every
+    # closable's: three lines of Python's protocol, no logic worth a shared base class.
     def __enter__(self) -> ServoChainEmulator:
         return self
 

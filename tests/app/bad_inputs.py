@@ -629,6 +629,7 @@ F = "{files}/"
 def _panorama_cases(command: tuple[str, ...], flag: tuple[str, ...] = ()) -> list[Case]:
     """Bad panorama files given to a command that reads one (``flag`` before the path)."""
     name = " ".join(command[:2])
+    # One row a bad file: a table of (what, file, words), alike in shape to any other table.
     return [
         Case(f"{name}: {what}", (*command, *flag, F + file), (file, words))
         for what, file, words in (
@@ -651,6 +652,9 @@ def _panorama_cases(command: tuple[str, ...], flag: tuple[str, ...] = ()) -> lis
 
 
 def _cases() -> list[Case]:
+    # A table, repeated on purpose: each case spells out the command line a user types and
+    # what its refusal must say, so the cases of one command share a shape (duplicates pairs
+    # them); a builder per command would hide the very line under test.
     pano = "{panorama}"
     relight = ("relight", "{field}", "--env", pano, "--view", "20,40", "--size", "32x32")
     relight_png = (*relight, "-o", "{tmp}/r.png")
@@ -1469,7 +1473,7 @@ def _cases() -> list[Case]:
             ("bad.toml",),
         ),
     ]
-    # rig plan
+    # rig plan (each line whole, as typed: the table's repetition is deliberate, see above)
     cases += [
         Case(
             "plan: missing --config",

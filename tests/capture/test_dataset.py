@@ -198,6 +198,8 @@ def test_write_image_records_digest_and_round_trips(tmp_path: Path) -> None:
     assert reopened.rig_config == {"name": "sim"}
     manifest = json.loads(dataset.manifest_path.read_text())
     assert manifest["schema_version"] == SCHEMA_VERSION
+    # Spelled out, not capture.manifest's _RECORD_KEYS: the test pins the file format, which a
+    # change to that constant must not move unseen.
     assert set(manifest["images"][0]) == {
         "kind",
         "camera_index",

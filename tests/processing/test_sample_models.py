@@ -25,21 +25,14 @@ from processing.sample_models import (
     shadow_mark_errors,
     with_geometric_visibility,
 )
-from sim.field import field_cameras, simulate_field
 from sim.scenes import build_scene
 from sim.synthetic_camera import DirectionalLight, light_visibility
+from tests.sim_fields import peak_seen, simulated_field
 
 
 def _field(tmp: Path, scene: str, lights: int, cameras: int, points: int) -> ReflectanceField:
     path = tmp / f"{scene}.zarr"
-    simulate_field(
-        path,
-        scene,
-        lights=lights,
-        cameras=field_cameras(cameras, width=48, height=48),
-        points=points,
-    )
-    return ReflectanceField.open(path)
+    return simulated_field(path, scene, lights=lights, cameras=cameras, size=48, points=points)
 
 
 @pytest.fixture(scope="module")
@@ -92,25 +85,6 @@ def _pixel_field(
     return ReflectanceField.open(tmp / name)
 
 
-def _peak_seen(field: ReflectanceField, alpha: float, fraction: float = 0.02) -> np.ndarray:
-    """Samples (P,) with a camera and a light whose half vector sees a GGX lobe of ``alpha``
-    at ``fraction`` of its peak or more (the fit's identifiability rule, with a margin)."""
-    assert field.points is not None and field.normals is not None
-    normals = field.normals.astype(np.float64)
-    best = np.zeros(field.shape[2])
-    for s, camera in enumerate(field.cameras):
-        view = camera.position - field.points.astype(np.float64)
-        view /= np.linalg.norm(view, axis=1, keepdims=True)
-        for light in field.light_directions:
-            half = view + light
-            half /= np.linalg.norm(half, axis=1, keepdims=True)
-            cos_h = np.sum(half * normals, axis=1)
-            ratio = alpha**4 / (cos_h**2 * (alpha**2 - 1) + 1) ** 2
-            lit = (normals @ light > 0) & field.visibility[s]
-            best = np.maximum(best, np.where(lit, ratio, 0.0))
-    return best >= fraction
-
-
 def test_fits_recover_the_glossy_material(
     glossy: ReflectanceField, glossy_models: SampleModels
 ) -> None:
@@ -124,7 +98,7 @@ def test_fits_recover_the_glossy_material(
     # Sample by sample, not only the median: where some observation sees the lobe near its
     # peak it is identified and recovered; elsewhere (samples seen by few cameras at grazing
     # angles) the fit leaves the lobe out rather than guess it from its far tail.
-    identified = ok & _peak_seen(glossy, 0.2)
+    identified = ok & peak_seen(glossy, 0.2)
     assert identified.mean() > 0.4
     good = (np.abs(fit.alpha - 0.2) < 0.01) & np.all(np.abs(fit.f0 - 0.25) < 0.01, axis=1)
     assert good[identified].mean() > 0.97

@@ -28,22 +28,17 @@ from render.model_relight import (
     relight_models,
 )
 from render.relighter import Relighter, RelightSettings
-from sim.field import field_cameras, simulate_field
 from sim.ground_truth import render_environment, shade_environment
 from sim.scenes import build_scene
+from tests.sim_fields import peak_seen, simulated_field
 
 
 @pytest.fixture(scope="module")
 def glossy(tmp_path_factory: pytest.TempPathFactory) -> ReflectanceField:
     path = tmp_path_factory.mktemp("glossy") / "f.zarr"
-    simulate_field(
-        path,
-        "glossy-sphere",
-        lights=16,
-        cameras=field_cameras(12, width=64, height=64),
-        points=2500,
+    return simulated_field(
+        path, "glossy-sphere", lights=16, cameras=12, size=64, points=2500, cached_slabs=12
     )
-    return ReflectanceField.open(path, cached_slabs=12)
 
 
 @pytest.fixture(scope="module")
@@ -66,30 +61,11 @@ def _relative_rmse(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean((a - b) ** 2) / np.mean(b**2)))
 
 
-def _peak_seen(field: ReflectanceField, alpha: float, fraction: float = 0.02) -> np.ndarray:
-    """Samples (P,) with a camera and a light whose half vector sees a GGX lobe of ``alpha``
-    at ``fraction`` of its peak or more (the fit's identifiability rule, with a margin)."""
-    assert field.points is not None and field.normals is not None
-    normals = field.normals.astype(np.float64)
-    best = np.zeros(field.shape[2])
-    for s, camera in enumerate(field.cameras):
-        view = camera.position - field.points.astype(np.float64)
-        view /= np.linalg.norm(view, axis=1, keepdims=True)
-        for light in field.light_directions:
-            half = view + light
-            half /= np.linalg.norm(half, axis=1, keepdims=True)
-            cos_h = np.sum(half * normals, axis=1)
-            ratio = alpha**4 / (cos_h**2 * (alpha**2 - 1) + 1) ** 2
-            lit = (normals @ light > 0) & field.visibility[s]
-            best = np.maximum(best, np.where(lit, ratio, 0.0))
-    return best >= fraction
-
-
 def test_a_measured_light_at_a_measured_camera_reproduces_the_slab(
     glossy: ReflectanceField, models: SampleModels
 ) -> None:
     choice = choose_model(models)
-    identified = _peak_seen(glossy, 0.2)
+    identified = peak_seen(glossy, 0.2)
     for s, t in ((2, 3), (7, 11)):
         lighting = prepare_lighting(models, _one_light(glossy.light_directions[t]))
         radiance = relight_models(models, choice, lighting, glossy.cameras[s])
@@ -175,7 +151,7 @@ def test_light_from_below_the_rig_is_evaluated_physically(
     assert isinstance(fit, ParametricFit) and glossy.normals is not None
     # Samples facing the light whose lobe the rig identified (the others have no fit, or a
     # broader lobe than the truth).
-    useful = fit.fitted & (glossy.normals @ below > 0.2) & _peak_seen(glossy, 0.2)
+    useful = fit.fitted & (glossy.normals @ below > 0.2) & peak_seen(glossy, 0.2)
     assert useful.sum() > 20
     np.testing.assert_allclose(radiance[useful], expected[useful], rtol=1e-3, atol=1e-6)
 

@@ -23,18 +23,14 @@ from render.relighting import (
     prepare_relighting,
     relight_request,
 )
-from sim.field import field_cameras, simulate_field
 from sim.rti_capture import write_rti_capture
+from tests.sim_fields import simulated_field
 
 
 @pytest.fixture(scope="module")
 def glossy(tmp_path_factory: pytest.TempPathFactory) -> ReflectanceField:
     path = tmp_path_factory.mktemp("relighting") / "glossy.zarr"
-    simulate_field(
-        path, "glossy-sphere", lights=16, cameras=field_cameras(8, width=32, height=32),
-        points=800,
-    )  # fmt: skip
-    return ReflectanceField.open(path)
+    return simulated_field(path, "glossy-sphere", lights=16, cameras=8, size=32, points=800)
 
 
 def test_a_given_mode_relights_as_its_engine_does(

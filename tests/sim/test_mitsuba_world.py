@@ -143,6 +143,8 @@ def test_an_unknown_world_name_lists_the_bundled_ones() -> None:
         load_world("marble-bust")
 
 
+# A table, one row a damaged world file and the message it must give: the rows share a shape
+# (duplicates pairs them) because each spells out its own edit of SPHERE, to be read at once.
 BAD_WORLDS = {
     "unknown shape": (
         SPHERE.replace('type = "sphere"', 'type = "cube"'),

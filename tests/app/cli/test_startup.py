@@ -94,6 +94,7 @@ def test_every_help_is_printed_without_importing_the_library() -> None:
     )
 
 
+# A table of (choice, owner, name there), one row a choice: alike in shape to other tables.
 @pytest.mark.parametrize(
     ("name", "owner", "attribute"),
     [
