@@ -338,10 +338,15 @@ def test_reply_faults_are_deterministic_for_a_seed(emulator: ServoChainEmulator)
         emulator.set_faults(FaultConfig(seed=seed, drop_probability=0.3, corrupt_probability=0.3))
         handler = ShortTimeoutPort(emulator.port)
         assert handler.openPort()
+        before = len(emulator.packets())
         try:
             for _ in range(12):
                 PH.ping(handler, 1)
-            time.sleep(0.02)
+            # Every ping handled before the log is read or the faults reset: on a loaded
+            # machine the emulator's thread can lag the 10 ms reply allowance.
+            deadline = time.monotonic() + 60.0
+            while len(emulator.packets()) < before + 12 and time.monotonic() < deadline:
+                time.sleep(0.01)
         finally:
             handler.closePort()
         return emulator.fault_log()
