@@ -1,16 +1,19 @@
-"""What the relighting engines share about a panorama: the user's controls to its lights.
+"""What the relighting engines share about a panorama: the user's controls, applied once.
 
-Every engine (:class:`render.relighter.Relighter`, :class:`render.model_relight.ModelRelighter`,
-:class:`render.predictor_relight.PredictorRelighter`) is lit the same way: its mode turns the
-user's controls into the lighting it takes (``lighting_controls``), the panorama is seen as the
-object sees it (its horizon, :class:`processing.panorama.VisibleEnvironments`), and the engine
-takes the result (:meth:`PanoramaLitEngine.take_panorama`; by default
-:func:`processing.environment.light_environment` and ``set_environment``).
+The user's controls on a panorama (:class:`PanoramaControls`: yaw, exposure, a modulation map)
+are applied in one place, :meth:`PanoramaControls.adjusted`, to the panorama as the object sees
+it (its horizon, :class:`processing.panorama.VisibleEnvironments`); the result, an
+:class:`AdjustedPanorama`, is what the mode's choice and the guards judge and what every
+engine (:class:`render.relighter.Relighter`, :class:`render.model_relight.ModelRelighter`,
+:class:`render.predictor_relight.PredictorRelighter`) is lit by
+(:meth:`PanoramaLitEngine.take_lighting`): the mode says which lights it takes
+(``lighting_controls``), made from the adjusted panorama without adjusting it again.
 """
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
@@ -18,9 +21,87 @@ from numpy.typing import NDArray
 
 from core.field_store import ReflectanceField
 from processing.environment import EnvironmentLighting, LightingControls, light_environment
-from processing.panorama import Panorama, VisibleEnvironments
+from processing.panorama import (
+    Panorama,
+    VisibleEnvironments,
+    adjust_panorama,
+    visible_environment,
+)
 
-__all__ = ["PanoramaLitEngine"]
+__all__ = ["AdjustedPanorama", "PanoramaControls", "PanoramaLitEngine"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class PanoramaControls:
+    """The user's controls on a panorama.
+
+    Attributes
+    ----------
+    yaw_deg : float, counter-clockwise rotation seen from above, degrees
+    exposure : float, radiance scale, > 0
+    modulation : ndarray, shape (h, w), float, optional: multiplies the sampling density of
+        the sampled modes (the paper's threshold modulation), in the panorama's own frame
+    """
+
+    yaw_deg: float = 0.0
+    exposure: float = 1.0
+    modulation: NDArray[np.floating] | None = None
+
+    @property
+    def turn(self) -> tuple[float, float]:
+        """The yaw and exposure: what the adjustment of the panorama depends on."""
+        return (self.yaw_deg, self.exposure)
+
+    def adjusted(self, visible: Panorama) -> AdjustedPanorama:
+        """``visible`` (a panorama past the object's horizon) rotated and scaled: the one place.
+
+        The horizon goes first, as the engines always did: the blocked copy is then made once
+        per panorama, and the pre-filter of the models' precomputed lighting, keyed on it, kept.
+        """
+        seen = adjust_panorama(visible, yaw_deg=self.yaw_deg, exposure=self.exposure)
+        return AdjustedPanorama(visible=visible, seen=seen, controls=self)
+
+    def as_seen(self, panorama: Panorama, field: ReflectanceField) -> Panorama:
+        """``panorama`` as ``field``'s object sees it: its horizon applied, rotated, scaled."""
+        return self.adjusted(visible_environment(panorama, field.below_horizon)).seen
+
+
+@dataclass(frozen=True)
+class AdjustedPanorama:
+    """A panorama under the user's controls, adjusted once.
+
+    Attributes
+    ----------
+    visible : Panorama, as read, past the object's horizon (yaw 0, exposure 1)
+    seen : Panorama, ``visible`` rotated by the yaw and scaled by the exposure: what the object
+        sees, what the mode's choice and the guards judge and what the lights are made of
+    controls : PanoramaControls, what it was adjusted by (and the modulation of its lights)
+    """
+
+    visible: Panorama
+    seen: Panorama
+    controls: PanoramaControls
+
+    def environment(self, controls: LightingControls) -> EnvironmentLighting:
+        """The lighting ``controls`` make of the seen panorama, recorded under ``controls``.
+
+        ``controls`` carry the yaw and exposure the seen panorama already holds; the lights
+        are made with them neutral, so nothing is rotated or scaled twice.
+        """
+        neutral = replace(controls, yaw_deg=0.0, exposure=1.0)
+        made = light_environment(self.seen, neutral)
+        return replace(made, panorama=self.seen, controls=controls)
+
+    def lights_as(self, other: AdjustedPanorama | None) -> bool:
+        """Whether ``other`` lights as this does (same panorama, controls and map, by identity)."""
+        if other is None:
+            return False
+        mine, theirs = self.controls, other.controls
+        return (
+            self.visible is other.visible
+            and mine.turn == theirs.turn
+            and mine.modulation is theirs.modulation
+        )
 
 
 class _ControlledMode(Protocol):
@@ -34,7 +115,7 @@ class _ControlledMode(Protocol):
 
 
 class PanoramaLitEngine:
-    """The base of the engines: ``set_lighting`` from a panorama and the user's controls.
+    """The base of the engines: lit by a panorama adjusted once by the user's controls.
 
     Parameters
     ----------
@@ -61,14 +142,37 @@ class PanoramaLitEngine:
     ) -> float:
         """Light with a panorama under the user's controls; returns the seconds it took."""
         start = time.perf_counter()
-        controls = self.settings.lighting_controls(
-            yaw_deg=yaw_deg, exposure=exposure, modulation=modulation
-        )
-        self.take_panorama(self._visible(panorama), controls)
+        controls = PanoramaControls(yaw_deg=yaw_deg, exposure=exposure, modulation=modulation)
+        self.take_lighting(controls.adjusted(self._visible(panorama)))
         return time.perf_counter() - start
 
+    def take_lighting(self, adjusted: AdjustedPanorama) -> EnvironmentLighting:
+        """Light with a panorama already adjusted; returns the lighting (panorama and lights).
+
+        The lights are made of ``adjusted.seen``. An engine that lights with the bare panorama
+        and overrides :meth:`take_panorama` turns and scales it itself (the models' precomputed
+        lighting rotates the harmonics of a panorama pre-filtered once, so a new yaw costs no
+        new pre-filter): it is handed the panorama before the controls, and the lighting
+        returned is still the one adjusted here.
+        """
+        c = adjusted.controls
+        controls = self.settings.lighting_controls(
+            yaw_deg=c.yaw_deg, exposure=c.exposure, modulation=c.modulation
+        )
+        environment = adjusted.environment(controls)
+        turns_itself = type(self).take_panorama is not PanoramaLitEngine.take_panorama
+        if controls.lighting == "panorama" and turns_itself:
+            self.take_panorama(adjusted.visible, controls)
+        else:
+            self.set_environment(environment)
+        return environment
+
     def take_panorama(self, panorama: Panorama, controls: LightingControls) -> None:
-        """Take the panorama as the object sees it, under ``controls`` (engines may override)."""
+        """Take a bare panorama, before ``controls``, and apply them (engines may override).
+
+        Called by :meth:`take_lighting` only for an override (an engine that turns its own
+        panorama); this default adjusts it and lights, as :meth:`take_lighting` would.
+        """
         self.set_environment(light_environment(panorama, controls))
 
     def set_environment(self, lighting: EnvironmentLighting) -> None:

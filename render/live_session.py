@@ -4,8 +4,10 @@ A live relighting session: the viewer's state, and one frame per change of its c
 
 The browser viewer (``rig view``) is a page over this class. The session holds the field, the
 two modes a person switches between (the paper's configuration and the mode chosen for the
-field by held-out lights, :func:`render.relight_mode.most_accurate_mode`), the loaded panoramas
-and modulation maps, and an engine per mode, so that a change costs what it changes: a new yaw,
+field by held-out lights, :func:`render.relight_mode.most_accurate_mode`) and the loaded
+panoramas and modulation maps. Each frame is a :class:`render.relighting.RelightRequest` run
+through the library's relighting, as ``rig relight`` runs one, kept in a
+:class:`render.relighting.RelightingCache` so that a change costs what it changes: a new yaw,
 exposure or panorama relights, an orbit or zoom re-plans the view, a new K or sampler opens the
 paper's mode anew (its engine holds no precomputation).
 
@@ -36,12 +38,18 @@ from processing.environment import EnvironmentLighting
 from processing.image_quality import relative_rmse_values
 from processing.panorama import Panorama
 from processing.sampling import SAMPLERS, SamplerName
-from render.model_relight import ModelRelighter, ModelRelightSettings
+from render.model_relight import ModelRelightSettings
 from render.output import display_picture
 from render.overlay import sample_overlay
-from render.relight_mode import ModeChoice, RelightEngine, RelightMode
+from render.relight_mode import ModeChoice, RelightMode
 from render.relighter import RelightSettings, RelitImage
-from render.relighting import ChosenMode, relighting_warnings
+from render.relighting import (
+    LitRelighting,
+    PanoramaControls,
+    RelightingCache,
+    RelightRequest,
+    relighting_warnings,
+)
 from render.tonemap import auto_exposure, tone_mapped_8bit
 
 __all__ = [
@@ -254,14 +262,6 @@ def error_picture(
     return np.ascontiguousarray(picture), relative_rmse_values(a, b, coverage)
 
 
-@dataclass
-class _Engine:
-    mode: RelightMode
-    engine: RelightEngine
-    lighting: tuple[Any, ...] | None = None
-    view: PinholeCamera | None = None
-
-
 class LiveSession:
     """A field relit live: controls in, frames out.
 
@@ -295,7 +295,8 @@ class LiveSession:
         self.truth = truth
         self.panoramas: dict[str, Panorama] = dict(panoramas)
         self.modulations: dict[str, NDArray[np.float32]] = {}
-        self._engines: dict[RelightMode, _Engine] = {}
+        self._relighting = RelightingCache(field, models=best.models, comparison=best.comparison)
+        self._lit: LitRelighting | None = None
         self._display_exposure: dict[str, float] = {}
         self._panorama_pictures: dict[tuple[Any, ...], NDArray[np.uint8]] = {}
         self._truths: dict[tuple[Any, ...], tuple[NDArray[np.float32], NDArray[np.bool_]]] = {}
@@ -331,12 +332,14 @@ class LiveSession:
         self._forget(name)
 
     def _forget(self, name: str) -> None:
-        """Drop what was computed with a panorama or map now replaced."""
+        """Drop what was computed with a panorama or map now replaced.
+
+        The engines need no word: the relighting tells panoramas and maps by identity, and a
+        replaced one is a new object.
+        """
         for cache in (self._panorama_pictures, self._truths, self._warnings):
             for key in [key for key in cache if name in key]:
                 del cache[key]
-        for engine in self._engines.values():
-            engine.lighting = None
 
     def mode(self, controls: LiveControls) -> RelightMode:
         """The relighting mode of the controls."""
@@ -378,7 +381,6 @@ class LiveSession:
             )
         if controls.modulation is not None and controls.modulation not in self.modulations:
             raise InputError(f"no modulation map {controls.modulation!r} is loaded")
-        seconds = {"lighting": 0.0, "view": 0.0}
         mode = self.mode(controls)
         notes: list[str] = []
         modulation = None
@@ -394,30 +396,26 @@ class LiveSession:
         if self.field.points is not None and self.can_orbit and camera != self._outside_checked:
             require_outside(self.field.points, camera)  # a pass over the cloud: once a view
             self._outside_checked = camera
-        engine = self._engine(mode)
-        panorama = self.panoramas[controls.panorama]
-        lighting = controls.lighting_key()
-        if engine.lighting != lighting:
-            seconds["lighting"] = engine.engine.set_lighting(
-                panorama, yaw_deg=controls.yaw_deg, exposure=controls.exposure,
-                modulation=modulation,
-            )  # fmt: skip
-            engine.lighting = lighting
-        if engine.view != camera:
-            seconds["view"] = engine.engine.set_view(camera)
-            engine.view = camera
+        lighting = PanoramaControls(
+            yaw_deg=controls.yaw_deg, exposure=controls.exposure, modulation=modulation
+        )
+        request = RelightRequest(
+            panorama=self.panoramas[controls.panorama], camera=camera, lighting=lighting, mode=mode
+        )
+        lit = self._relighting.prepare(request)
+        seconds = dict(lit.seconds)
         start = time.perf_counter()
-        image = engine.engine.render()
+        image = lit.engine.render()
         seconds["render"] = time.perf_counter() - start
         start = time.perf_counter()
-        environment = engine.engine.environment
-        assert environment is not None  # a lighting was set above
+        environment = lit.environment
         exposure = self._exposure(controls, image)
         picture = display_picture(image.rgb, image.coverage, exposure)
-        panorama_picture = self._panorama_picture(lighting, environment)
+        panorama_picture = self._panorama_picture(controls.lighting_key(), environment)
         seconds["display"] = time.perf_counter() - start
         if controls.truth and self.truth is None:
             notes.append("this field has no ground truth (it was not simulated)")
+        self._lit = lit
         self.frame = LiveFrame(
             controls=controls,
             picture=picture,
@@ -463,10 +461,9 @@ class LiveSession:
         frame = self._last_frame()
         key = (*frame.controls.lighting_key(), frame.camera)
         if key not in self._warnings:
-            chosen = ChosenMode(frame.relight_mode, self.best.models, self.best.comparison)
-            found = relighting_warnings(
-                self.field, frame.camera, frame.environment.panorama, chosen
-            )
+            lit = self._lit
+            assert lit is not None  # set with the frame
+            found = relighting_warnings(self.field, lit.camera, lit.seen, lit.chosen)
             remedy = "--scheme model"
             if self.best.mode.uses_models:
                 remedy = "the viewer's best mode"
@@ -489,28 +486,6 @@ class LiveSession:
         picture = display_picture(rgb, covered, frame.exposure)
         error, rmse = error_picture(frame.image.rgb, rgb, covered & frame.image.coverage)
         return TruthComparison(picture, error, rmse, time.perf_counter() - start)
-
-    def _engine(self, mode: RelightMode) -> _Engine:
-        if mode not in self._engines:
-            self._engines[mode] = _Engine(mode, self._open(mode))
-            # Interpolating engines at other K or samplers hold only their lighting; the model
-            # engines (exact and precomputed) hold prepared models and transfer: kept.
-            stale = [m for m in self._engines if m != mode and not m.uses_models]
-            for other in stale:
-                del self._engines[other]
-        return self._engines[mode]
-
-    def _open(self, mode: RelightMode) -> RelightEngine:
-        """The mode's engine; a model engine shares the models another one prepared."""
-        if isinstance(mode, ModelRelightSettings):
-            for opened in self._engines.values():
-                engine = opened.engine
-                if isinstance(engine, ModelRelighter):
-                    try:
-                        return engine.with_lighting(mode)
-                    except InputError:
-                        continue  # another model or visibility: prepare anew
-        return mode.open(self.field, self.best.models if mode.uses_models else None)
 
     def _exposure(self, controls: LiveControls, image: RelitImage) -> float:
         """The display exposure: set by the first frame under each panorama, then fixed.

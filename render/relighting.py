@@ -1,29 +1,33 @@
 """One relighting of a field under a panorama: the request, the choice of mode, the warnings.
 
 Every program that relights a field under an environment (``rig relight``, ``rig batch``, the
-demo and its simulated capture, the live viewer's warnings) states what it wants as data, a
+demo and its simulated capture, the live viewer) states what it wants as data, a
 :class:`RelightRequest`: the panorama and its controls (:class:`PanoramaControls`), the view,
 and either a mode or what the user asked of one (:class:`ModeRequest`, resolved by
-:func:`choose_mode`). :func:`prepare_relighting` resolves the mode, measures the warnings once
-on the panorama as the object sees it and opens the engine; :func:`relight_request` renders the
-request's view with it. The engines themselves are :mod:`render.relight_mode`'s.
+:func:`choose_mode`). The controls are applied once, to the panorama as the object sees it;
+the mode's choice, the guards and the engine's lights all take that panorama.
+:func:`prepare_relighting` resolves the mode, measures the warnings and opens the engine, lit,
+at the request's view; :func:`relight_request` renders it. A program that relights request
+after request on one field (the viewer) keeps a :class:`RelightingCache`, the same steps with
+what did not change kept: the adjusted panorama, the chosen mode, the engines (their models,
+precomputation and lighting) and their views. The engines themselves are
+:mod:`render.relight_mode`'s.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import time
 from dataclasses import dataclass, field, replace
 from typing import Literal
-
-import numpy as np
-from numpy.typing import NDArray
 
 from core.camera_model import PinholeCamera
 from core.errors import InputError, RigError
 from core.field_store import ReflectanceField
+from processing.environment import EnvironmentLighting
 from processing.interpolation import InterpolationMethod
-from processing.panorama import Panorama, adjust_panorama, visible_environment
+from processing.panorama import Panorama, VisibleEnvironments
 from processing.sample_model_store import (
     default_models_path,
     models_for_field,
@@ -31,9 +35,10 @@ from processing.sample_model_store import (
 )
 from processing.sample_models import SampleModels
 from processing.sampling import SamplerName
+from render.engine_lighting import AdjustedPanorama, PanoramaControls, PanoramaLitEngine
 from render.environment_choice import CandidateScore, choose_environment_mode, environment_mode
 from render.guards import RelightWarning, relight_warnings
-from render.model_relight import ModelLightingMode, ModelRelightSettings
+from render.model_relight import ModelLightingMode, ModelRelighter, ModelRelightSettings
 from render.relight_mode import (
     MOST_ACCURATE_MODELS,
     HeldOutComparison,
@@ -46,10 +51,12 @@ from render.relighter import RelightSettings, RelitImage, Scheme
 
 __all__ = [
     "ChosenMode",
+    "LitRelighting",
     "ModeRequest",
     "PanoramaControls",
     "PreparedRelighting",
     "RelightRequest",
+    "RelightingCache",
     "Relit",
     "choose_mode",
     "prepare_relighting",
@@ -60,32 +67,6 @@ __all__ = [
 
 #: Share of the light from outside the measured lights above which a relit image says so.
 OUTSIDE_NOTE = 0.05
-
-
-@dataclass(frozen=True, kw_only=True)
-class PanoramaControls:
-    """The user's controls on a panorama.
-
-    Attributes
-    ----------
-    yaw_deg : float, counter-clockwise rotation seen from above, degrees
-    exposure : float, radiance scale, > 0
-    modulation : ndarray, shape (h, w), float, optional: multiplies the sampling density of
-        the sampled modes (the paper's threshold modulation), in the panorama's own frame
-    """
-
-    yaw_deg: float = 0.0
-    exposure: float = 1.0
-    modulation: NDArray[np.floating] | None = None
-
-    def as_seen(self, panorama: Panorama, field: ReflectanceField) -> Panorama:
-        """``panorama`` as ``field``'s object sees it: rotated, scaled, its horizon applied.
-
-        What the mode's choice and the guards judge; the engines apply the same controls to
-        the panorama themselves (with their own caches).
-        """
-        adjusted = adjust_panorama(panorama, yaw_deg=self.yaw_deg, exposure=self.exposure)
-        return visible_environment(adjusted, field.below_horizon)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -271,13 +252,15 @@ class PreparedRelighting:
     engine : RelightEngine, lit by the request's panorama and controls, set to its view
     chosen : ChosenMode
     warnings : tuple of RelightWarning, what to expect of this relighting
-    seen : Panorama, the panorama as the object sees it
+    seen : Panorama, the panorama as the object sees it (the controls applied)
+    environment : EnvironmentLighting, the lighting the engine took: ``seen`` and its lights
     """
 
     engine: RelightEngine
     chosen: ChosenMode
     warnings: tuple[RelightWarning, ...]
     seen: Panorama
+    environment: EnvironmentLighting
 
 
 def prepare_relighting(
@@ -291,21 +274,152 @@ def prepare_relighting(
     ``models``: the field's fit when the caller has it (a given mode that uses models needs
     one; a resolved mode brings its own).
     """
-    seen = request.lighting.as_seen(request.panorama, field)
-    if isinstance(request.mode, ModeRequest):
-        chosen = choose_mode(field, request.mode, seen, models=models)
-    else:
-        chosen = ChosenMode(request.mode, models)
-    warnings = relighting_warnings(field, request.camera, seen, chosen)
-    engine = open_relighter(field, chosen.mode, chosen.models)
-    engine.set_lighting(
-        request.panorama,
-        yaw_deg=request.lighting.yaw_deg,
-        exposure=request.lighting.exposure,
-        modulation=request.lighting.modulation,
-    )
-    engine.set_view(request.camera)
-    return PreparedRelighting(engine, chosen, tuple(warnings), seen)
+    lit = RelightingCache(field, models=models).prepare(request)
+    warnings = relighting_warnings(field, lit.camera, lit.seen, lit.chosen)
+    return PreparedRelighting(lit.engine, lit.chosen, tuple(warnings), lit.seen, lit.environment)
+
+
+@dataclass(frozen=True)
+class LitRelighting:
+    """A request as a :class:`RelightingCache` prepared it: its engine, lit, at its view.
+
+    Attributes
+    ----------
+    engine : RelightEngine, lit by ``adjusted``, set to ``camera``
+    chosen : ChosenMode
+    adjusted : AdjustedPanorama, the request's panorama under its controls
+    environment : EnvironmentLighting, the lighting the engine took (the panorama as lit and
+        its lights)
+    camera : PinholeCamera, the view
+    seconds : dict, what was redone for this request: "lighting" (the adjustment and the
+        engine's lighting) and "view", 0.0 where the engine kept what it had
+    """
+
+    engine: RelightEngine
+    chosen: ChosenMode
+    adjusted: AdjustedPanorama
+    environment: EnvironmentLighting
+    camera: PinholeCamera
+    seconds: dict[str, float]
+
+    @property
+    def seen(self) -> Panorama:
+        """The panorama as the object sees it (the controls applied)."""
+        return self.adjusted.seen
+
+
+@dataclass
+class _Opened:
+    """An engine the cache holds, the fit it was opened with, and what it was last set to."""
+
+    engine: RelightEngine
+    models: SampleModels | None
+    lit: AdjustedPanorama | None = None
+    environment: EnvironmentLighting | None = None
+    view: PinholeCamera | None = None
+
+
+class RelightingCache:
+    """Requests on one field relit one after another, each redoing only what it changes.
+
+    The steps of :func:`prepare_relighting`, with what a request shares with the one before
+    kept: the panorama adjusted by its controls (several modes under one lighting adjust it
+    once), the mode chosen for a :class:`ModeRequest`, an engine per mode with its lighting
+    and view. The engines of models are kept, whatever mode comes next (their models and
+    transfer are the expensive part) and a new one shares their prepared models; an engine
+    that interpolates holds only its lighting, so one of another K or sampler replaces it.
+    Panoramas and modulation maps are told apart by identity: load a changed one as a new
+    object.
+
+    Parameters
+    ----------
+    field : ReflectanceField
+    models : SampleModels, optional, the field's fit when the caller has it
+    comparison : HeldOutComparison, optional, the held-out measurement behind the caller's
+        choice of mode (it informs the warnings)
+    """
+
+    def __init__(
+        self,
+        field: ReflectanceField,
+        *,
+        models: SampleModels | None = None,
+        comparison: HeldOutComparison | None = None,
+    ) -> None:
+        self.field = field
+        self.models = models
+        self.comparison = comparison
+        self._visible = VisibleEnvironments(field.below_horizon)
+        self._adjusted: AdjustedPanorama | None = None
+        self._chosen: tuple[ModeRequest, Panorama, ChosenMode] | None = None
+        self._engines: dict[RelightMode, _Opened] = {}
+
+    def prepare(self, request: RelightRequest) -> LitRelighting:
+        """``request``'s engine, lit and at its view, redoing only what changed."""
+        start = time.perf_counter()
+        adjusted = self._adjust(request)
+        adjusting = time.perf_counter() - start
+        chosen = self._choose(request.mode, adjusted)
+        opened = self._engine(chosen)
+        seconds = {"lighting": 0.0, "view": 0.0}
+        if opened.environment is None or not adjusted.lights_as(opened.lit):
+            start = time.perf_counter()
+            engine = opened.engine
+            # Every mode's engine is lit through the shared base, where the controls apply once.
+            assert isinstance(engine, PanoramaLitEngine)
+            opened.environment = engine.take_lighting(adjusted)
+            opened.lit = adjusted
+            seconds["lighting"] = adjusting + time.perf_counter() - start
+        if opened.view != request.camera:
+            seconds["view"] = opened.engine.set_view(request.camera)
+            opened.view = request.camera
+        return LitRelighting(
+            opened.engine, chosen, adjusted, opened.environment, request.camera, seconds
+        )
+
+    def _adjust(self, request: RelightRequest) -> AdjustedPanorama:
+        """The request's panorama under its controls: adjusted anew only when they changed."""
+        visible, controls = self._visible(request.panorama), request.lighting
+        last = self._adjusted
+        if last is None or last.visible is not visible or last.controls.turn != controls.turn:
+            last = controls.adjusted(visible)
+        elif last.controls.modulation is not controls.modulation:
+            # The map steers the sampling of the lights; the panorama's rotation and scale stand.
+            last = replace(last, controls=controls)
+        self._adjusted = last
+        return last
+
+    def _choose(self, mode: RelightMode | ModeRequest, adjusted: AdjustedPanorama) -> ChosenMode:
+        """The mode: given, or chosen for the request (once while it and the panorama stand)."""
+        if not isinstance(mode, ModeRequest):
+            return ChosenMode(mode, self.models, self.comparison)
+        last = self._chosen
+        if last is None or last[0] != mode or last[1] is not adjusted.seen:
+            chosen = choose_mode(self.field, mode, adjusted.seen, models=self.models)
+            self._chosen = (mode, adjusted.seen, chosen)
+            return chosen
+        return last[2]
+
+    def _engine(self, chosen: ChosenMode) -> _Opened:
+        mode = chosen.mode
+        held = self._engines.get(mode)
+        if held is None or held.models is not chosen.models:
+            self._engines[mode] = _Opened(self._open(chosen), chosen.models)
+            stale = [m for m in self._engines if m != mode and not m.uses_models]
+            for other in stale:
+                del self._engines[other]
+        return self._engines[mode]
+
+    def _open(self, chosen: ChosenMode) -> RelightEngine:
+        """The mode's engine; a model engine shares the models another one prepared."""
+        if isinstance(chosen.mode, ModelRelightSettings):
+            for opened in self._engines.values():
+                if isinstance(opened.engine, ModelRelighter) and opened.models is chosen.models:
+                    try:
+                        return opened.engine.with_lighting(chosen.mode)
+                    except InputError:
+                        continue  # another model or visibility: prepare anew
+        return open_relighter(self.field, chosen.mode, chosen.models)
 
 
 def relighting_warnings(

@@ -117,3 +117,39 @@ def test_error_picture_is_the_relative_error() -> None:
     assert picture[0, 0].sum() > 600 and picture[1, 1].sum() < 10  # 50 %: bright; 0: dark
     _, nothing = error_picture(rgb, truth, np.zeros((2, 2), bool))
     assert np.isnan(nothing)
+
+
+def test_a_frame_is_a_relighting_request_adjusted_once(
+    session: LiveSession, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import processing.panorama
+    from render.relighting import PanoramaControls, RelightRequest, relight_request
+
+    rotations: list[float] = []
+    rotate = processing.panorama.rotate_panorama_yaw
+
+    def counted(image: np.ndarray, yaw_deg: float) -> np.ndarray:
+        rotations.append(yaw_deg)
+        return rotate(image, yaw_deg)
+
+    monkeypatch.setattr(processing.panorama, "rotate_panorama_yaw", counted)
+    for mode in ("paper", "best"):
+        controls = session.initial.updated({"mode": mode, "yaw_deg": 23.0, "exposure": 1.5})
+        frame = session.render(controls)
+        # The yaw is applied once per lighting, by the request (the best mode under the same
+        # lighting reuses it); the frame's lighting is that.
+        assert rotations == ([23.0] if mode == "paper" else [])
+        assert frame.environment.controls.yaw_deg == 23.0
+        rotations.clear()
+        orbit = session.render(controls.updated({"azimuth_deg": 70.0}))
+        assert rotations == [] and orbit.environment is frame.environment
+        # What rig relight renders for the same request.
+        request = RelightRequest(
+            panorama=session.panoramas[controls.panorama],
+            camera=orbit.camera,
+            lighting=PanoramaControls(yaw_deg=23.0, exposure=1.5),
+            mode=orbit.relight_mode,
+        )
+        relit = relight_request(session.field, request, models=session.best.models)
+        assert np.array_equal(relit.image.rgb, orbit.image.rgb) and rotations == [23.0]
+        rotations.clear()

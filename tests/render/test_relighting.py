@@ -116,3 +116,81 @@ def test_a_field_of_pixels_is_relit_by_the_method_chosen_under_the_panorama(
     assert relit.image.rgb.shape == (6, 8, 3) and relit.image.coverage.all()
     with pytest.raises(InputError, match="--method rbf chooses the relighting; drop -k"):
         choose_mode(field, ModeRequest(method="rbf", k=8), panorama)
+
+
+def _counting_rotations(monkeypatch: pytest.MonkeyPatch) -> list[float]:
+    """Every yaw rotation of a panorama from here on (the controls' adjustment rotates once)."""
+    import processing.panorama
+
+    rotations: list[float] = []
+    rotate = processing.panorama.rotate_panorama_yaw
+
+    def counted(image: np.ndarray, yaw_deg: float) -> np.ndarray:
+        rotations.append(yaw_deg)
+        return rotate(image, yaw_deg)
+
+    monkeypatch.setattr(processing.panorama, "rotate_panorama_yaw", counted)
+    return rotations
+
+
+def test_a_request_applies_its_controls_once(
+    glossy: ReflectanceField, courtyard_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    panorama = read_panorama(courtyard_path)
+    rotations = _counting_rotations(monkeypatch)
+    prepared = prepare_relighting(
+        glossy,
+        RelightRequest(
+            panorama=panorama,
+            camera=glossy.cameras[0],
+            lighting=PanoramaControls(yaw_deg=30.0, exposure=2.0),
+            mode=RelightSettings.paper_configuration(k=16),
+        ),
+    )
+    assert rotations == [30.0]
+    # The engine's lights are made of the panorama the guards judged, recorded under the controls.
+    assert prepared.environment.panorama is prepared.seen
+    assert prepared.engine.environment is prepared.environment
+    assert (prepared.environment.controls.yaw_deg, prepared.environment.controls.exposure) == (
+        30.0,
+        2.0,
+    )
+
+
+def test_a_cache_redoes_only_what_a_request_changes(
+    glossy: ReflectanceField, courtyard_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from render.model_relight import ModelRelightSettings
+    from render.relighting import RelightingCache
+
+    panorama = read_panorama(courtyard_path)
+    paper = RelightSettings.paper_configuration(k=16)
+    first = RelightRequest(
+        panorama=panorama,
+        camera=PinholeCamera(10.0, 40.0, width=32, height=32),
+        lighting=PanoramaControls(yaw_deg=45.0),
+        mode=paper,
+    )
+    cache = RelightingCache(glossy)
+    rotations = _counting_rotations(monkeypatch)
+    lit = cache.prepare(first)
+    assert lit.seconds["lighting"] > 0.0 and lit.seconds["view"] > 0.0 and rotations == [45.0]
+    expected = relight_request(glossy, first).image.rgb
+    assert np.array_equal(lit.engine.render().rgb, expected)
+    rotations.clear()
+    # Another view: the lighting stands.
+    orbit = replace(first, camera=PinholeCamera(60.0, 40.0, width=32, height=32))
+    moved = cache.prepare(orbit)
+    assert moved.seconds["lighting"] == 0.0 and moved.seconds["view"] > 0.0 and rotations == []
+    # Another mode under the same lighting: the adjusted panorama is reused, not rotated again.
+    models = ModelRelightSettings(lighting="grid", grid_height=8)
+    modelled = cache.prepare(replace(orbit, mode=models))
+    assert modelled.adjusted is moved.adjusted and rotations == []
+    assert modelled.environment.panorama is modelled.seen
+    # Back to the paper's mode at another K: its engine holds only lighting, so it is opened
+    # anew; the model engine is kept, and its view and lighting with it.
+    cache.prepare(replace(orbit, mode=replace(paper, k=8)))
+    again = cache.prepare(replace(orbit, mode=models))
+    assert again.engine is modelled.engine and again.seconds == {"lighting": 0.0, "view": 0.0}
+    turned = cache.prepare(replace(orbit, mode=models, lighting=PanoramaControls(yaw_deg=90.0)))
+    assert turned.seconds["lighting"] > 0.0 and rotations == [90.0]
