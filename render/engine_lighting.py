@@ -140,11 +140,25 @@ class PanoramaLitEngine:
         exposure: float = 1.0,
         modulation: NDArray[np.floating] | None = None,
     ) -> float:
-        """Light with a panorama under the user's controls; returns the seconds it took."""
+        """Light with a bare panorama under the user's controls; returns the seconds it took.
+
+        For a caller that holds a panorama and no request: :meth:`adjust`, then
+        :meth:`take_lighting`. A relighting of the library goes through
+        :func:`render.relighting.prepare_relighting`, which adjusts the panorama once for the
+        mode's choice, the guards and the engine.
+        """
         start = time.perf_counter()
         controls = PanoramaControls(yaw_deg=yaw_deg, exposure=exposure, modulation=modulation)
-        self.take_lighting(controls.adjusted(self._visible(panorama)))
+        self.take_lighting(self.adjust(panorama, controls))
         return time.perf_counter() - start
+
+    def adjust(self, panorama: Panorama, controls: PanoramaControls) -> AdjustedPanorama:
+        """``panorama`` past this field's horizon, under ``controls`` (adjusted once).
+
+        The blocked copy is kept while the same panorama (by identity) comes back, so a sequence
+        of yaws adjusts one visible panorama and the pre-filter keyed on it stands.
+        """
+        return controls.adjusted(self._visible(panorama))
 
     def take_lighting(self, adjusted: AdjustedPanorama) -> EnvironmentLighting:
         """Light with a panorama already adjusted; returns the lighting (panorama and lights).
@@ -152,8 +166,8 @@ class PanoramaLitEngine:
         The lights are made of ``adjusted.seen``. An engine that lights with the bare panorama
         and overrides :meth:`take_panorama` turns and scales it itself (the models' precomputed
         lighting rotates the harmonics of a panorama pre-filtered once, so a new yaw costs no
-        new pre-filter): it is handed the panorama before the controls, and the lighting
-        returned is still the one adjusted here.
+        new pre-filter): it is handed the panorama before the controls beside the lighting
+        made here, which it shows.
         """
         c = adjusted.controls
         controls = self.settings.lighting_controls(
@@ -162,18 +176,23 @@ class PanoramaLitEngine:
         environment = adjusted.environment(controls)
         turns_itself = type(self).take_panorama is not PanoramaLitEngine.take_panorama
         if controls.lighting == "panorama" and turns_itself:
-            self.take_panorama(adjusted.visible, controls)
+            self.take_panorama(adjusted.visible, environment)
         else:
             self.set_environment(environment)
         return environment
 
-    def take_panorama(self, panorama: Panorama, controls: LightingControls) -> None:
-        """Take a bare panorama, before ``controls``, and apply them (engines may override).
+    def take_panorama(self, visible: Panorama, lighting: EnvironmentLighting) -> None:
+        """Light with ``visible`` turned and scaled by the engine itself (engines may override).
 
-        Called by :meth:`take_lighting` only for an override (an engine that turns its own
-        panorama); this default adjusts it and lights, as :meth:`take_lighting` would.
+        Parameters
+        ----------
+        visible : Panorama, before the controls (past the field's horizon)
+        lighting : EnvironmentLighting, what the controls made of it (the adjusted panorama,
+            recorded under the controls): the lighting the engine shows
+
+        Called by :meth:`take_lighting` only for an override; this default takes ``lighting``.
         """
-        self.set_environment(light_environment(panorama, controls))
+        self.set_environment(lighting)
 
     def set_environment(self, lighting: EnvironmentLighting) -> None:
         """Take a lighting made by :func:`light_environment` (each engine its own way)."""

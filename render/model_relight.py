@@ -58,7 +58,7 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
 from core.point_spacing import point_spacing
-from processing.environment import EnvironmentLighting, LightingControls, light_environment
+from processing.environment import EnvironmentLighting, LightingControls
 from processing.interpolation import interpolation_weights
 from processing.panorama import Panorama
 from processing.sample_model_store import models_for_field
@@ -508,12 +508,10 @@ class ModelRelighter(PanoramaLitEngine):
         self._environment: EnvironmentLighting | None = None
         self._view: FieldView | None = None
         # Precomputed lighting: the pre-filtered panorama (the last one, by identity), the yaw
-        # and exposure in force, the samples' transfer (per model, made on first use) and the
-        # panorama as shown, adjusted only when asked for.
+        # and exposure in force and the samples' transfer (per model, made on first use).
         self._prefilter: tuple[Panorama, PanoramaPrefilter] | None = None
         self._precomputed: tuple[PanoramaPrefilter, float, float] | None = None
         self._transfers: dict[str, SampleTransfer] = {}
-        self._shown: tuple[Panorama, LightingControls] | None = None
         self._bright: ModelLighting | None = None
         self._outside: NDArray[np.bool_] | None = None
 
@@ -539,18 +537,30 @@ class ModelRelighter(PanoramaLitEngine):
 
     @property
     def environment(self) -> EnvironmentLighting | None:
-        """The current lighting: the panorama as relit (yaw, exposure) and its lights."""
-        if self._environment is None and self._shown is not None:
-            self._environment = light_environment(*self._shown)
+        """The current lighting: the panorama as relit (yaw, exposure) and its lights.
+
+        Under precomputed lighting, the adjusted panorama it was handed
+        (:meth:`take_panorama`), whose yaw its terms turn to.
+        """
         return self._environment
 
-    def take_panorama(self, panorama: Panorama, controls: LightingControls) -> None:
-        """The precomputed lighting turns its pre-filtered panorama; the others sum lights."""
+    def take_panorama(self, visible: Panorama, lighting: EnvironmentLighting) -> None:
+        """Light with ``visible`` turned by ``lighting``'s controls, and show ``lighting``.
+
+        The precomputed lighting turns its own pre-filter of ``visible`` (the panorama before
+        the yaw and exposure) by the yaw and scales it by the exposure, on purpose: its
+        harmonics, grid and bright lights turn about +z as they stand, where pre-filtering the
+        adjusted panorama anew would cost about a second a yaw (the viewer's drag, a
+        sequence's frames). The panorama shown is still the one the controls adjusted once
+        (``lighting.panorama``), which the mode's choice and the guards judged. The other
+        lightings take ``lighting``'s lights.
+        """
         if self.settings.lighting == "precomputed":
-            self._precompute(self._prefiltered(panorama), controls.yaw_deg, controls.exposure)
-            self._environment, self._shown = None, (panorama, controls)
+            controls = lighting.controls
+            self._precompute(self._prefiltered(visible), controls.yaw_deg, controls.exposure)
+            self._environment = lighting
         else:
-            self.set_environment(light_environment(panorama, controls))
+            self.set_environment(lighting)
 
     def set_environment(self, lighting: EnvironmentLighting) -> None:
         """Prepare the lights of a lighting (from :func:`light_environment`)."""
@@ -558,7 +568,7 @@ class ModelRelighter(PanoramaLitEngine):
             self._precompute(self._prefiltered(lighting.panorama), 0.0, 1.0)
         else:
             self.set_lights(lighting.light_set())
-        self._environment, self._shown = lighting, None
+        self._environment = lighting
 
     def _prefiltered(self, panorama: Panorama) -> PanoramaPrefilter:
         """The panorama pre-filtered (about a second), reused while the same one lights."""
@@ -625,7 +635,7 @@ class ModelRelighter(PanoramaLitEngine):
         other = copy.copy(self)
         other.settings = settings
         other._lighting = None
-        other._environment, other._shown, other._precomputed = None, None, None
+        other._environment, other._precomputed = None, None
         other._transfers = {}
         return other
 
@@ -635,7 +645,7 @@ class ModelRelighter(PanoramaLitEngine):
         Summed exactly, whatever the lighting setting (there is no panorama to pre-filter).
         """
         self._lighting = prepare_lighting(self.models, lights)
-        self._environment, self._shown, self._precomputed = None, None, None
+        self._environment, self._precomputed = None, None
 
     def set_view(self, camera: PinholeCamera) -> float:
         """Plan the splats of a view (point fields); returns the seconds it took."""

@@ -243,26 +243,6 @@ class RelightRequest:
     mode: RelightMode | ModeRequest = field(default_factory=ModeRequest)
 
 
-@dataclass(frozen=True)
-class PreparedRelighting:
-    """A request's engine, lit and set to its view, with its mode and warnings.
-
-    Attributes
-    ----------
-    engine : RelightEngine, lit by the request's panorama and controls, set to its view
-    chosen : ChosenMode
-    warnings : tuple of RelightWarning, what to expect of this relighting
-    seen : Panorama, the panorama as the object sees it (the controls applied)
-    environment : EnvironmentLighting, the lighting the engine took: ``seen`` and its lights
-    """
-
-    engine: RelightEngine
-    chosen: ChosenMode
-    warnings: tuple[RelightWarning, ...]
-    seen: Panorama
-    environment: EnvironmentLighting
-
-
 def prepare_relighting(
     field: ReflectanceField,
     request: RelightRequest,
@@ -276,7 +256,7 @@ def prepare_relighting(
     """
     lit = RelightingCache(field, models=models).prepare(request)
     warnings = relighting_warnings(field, lit.camera, lit.seen, lit.chosen)
-    return PreparedRelighting(lit.engine, lit.chosen, tuple(warnings), lit.seen, lit.environment)
+    return PreparedRelighting(**vars(lit), warnings=tuple(warnings))
 
 
 @dataclass(frozen=True)
@@ -306,6 +286,21 @@ class LitRelighting:
     def seen(self) -> Panorama:
         """The panorama as the object sees it (the controls applied)."""
         return self.adjusted.seen
+
+
+@dataclass(frozen=True)
+class PreparedRelighting(LitRelighting):
+    """A request's engine, lit and at its view (:class:`LitRelighting`), with its warnings.
+
+    A sequence turns its adjusted panorama or its view further, frame 0 being the engine as
+    prepared (:func:`render.sequence.relight_prepared_sequence`).
+
+    Attributes
+    ----------
+    warnings : tuple of RelightWarning, what to expect of this relighting
+    """
+
+    warnings: tuple[RelightWarning, ...]
 
 
 @dataclass

@@ -160,7 +160,7 @@ def _relight_field(
         prepare_relighting,
         relighting_notes,
     )
-    from render.sequence import relight_sequence
+    from render.sequence import relight_prepared_sequence
 
     resample_to, native = None, (0, 0)
     if field.sample_kind == "pixels":
@@ -206,10 +206,8 @@ def _relight_field(
         for note in relighting_notes(image, uses_models=prepared.chosen.mode.uses_models):
             print(note)
         return 0
-    frames = relight_sequence(
-        prepared.engine, panorama, camera, kind=args.sequence, frames=args.frames,
-        yaw_deg=args.yaw, exposure=args.exposure, modulation=modulation,
-    )  # fmt: skip
+    # Frame 0 is the engine as prepared; the frames turn the request's controls or camera.
+    frames = relight_prepared_sequence(prepared, kind=args.sequence, frames=args.frames)
     if resample_to is not None:
         say_resampled(native, resample_to)
         frames = [resample(frame, resample_to) for frame in frames]
