@@ -70,7 +70,27 @@ def build_parser() -> argparse.ArgumentParser:
     add_calibrate(commands)
     add_process(commands)
     add_sim(commands)
+    _quiet_everywhere(parser)
     return parser
+
+
+def _quiet_everywhere(parser: argparse.ArgumentParser) -> None:
+    """Give every command that lacks its own ``--quiet`` one (no progress bars).
+
+    Any command may report progress through the library, so every one takes the flag a
+    script passes to silence it; commands that say more about theirs define it themselves.
+    argparse has no public walk over its sub-commands, hence its private ``_actions``.
+    """
+    nested = [
+        action for action in parser._actions if isinstance(action, argparse._SubParsersAction)
+    ]
+    if not nested:
+        if not any("--quiet" in action.option_strings for action in parser._actions):
+            parser.add_argument("--quiet", action="store_true", help="no progress bars")
+        return
+    for action in nested:
+        for command in dict.fromkeys(action.choices.values()):  # aliases repeat a parser
+            _quiet_everywhere(command)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

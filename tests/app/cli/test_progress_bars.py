@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import pytest
 
-from app.cli import main
+from app.cli import build_parser, main
 from core.lp_format import read_lp
 from core.sample_data import rti_capture_path
 
@@ -38,3 +39,22 @@ def test_a_command_draws_its_bars_unless_quiet(
     else:
         # The import's bar (core.progress's events, drawn by tqdm), finished at 16/16.
         assert "rti: 100%" in captured.err and "16/16" in captured.err
+
+
+def _commands(
+    parser: argparse.ArgumentParser, words: tuple[str, ...] = ()
+) -> list[tuple[str, ...]]:
+    """Every runnable command's words and parser (``sim rti`` as ("sim", "rti"))."""
+    nested = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if not nested:
+        return [words]
+    return [found for action in nested for name, command in action.choices.items()
+            for found in _commands(command, (*words, name))]  # fmt: skip
+
+
+def test_every_command_takes_quiet(capsys: pytest.CaptureFixture[str]) -> None:
+    commands = _commands(build_parser())
+    assert ("relight",) in commands and ("sim", "rti") in commands
+    for words in commands:
+        assert main([*words, "--help"]) == 0
+        assert "--quiet" in capsys.readouterr().out, words
