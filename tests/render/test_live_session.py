@@ -12,6 +12,7 @@ from render.live_session import LiveControls, LiveSession, error_picture
 from render.relight_mode import most_accurate_mode
 from sim.field import field_cameras, simulate_field
 from sim.ground_truth import field_truth
+from tests.call_counting import counting_calls
 
 
 @pytest.fixture(scope="module")
@@ -125,14 +126,7 @@ def test_a_frame_is_a_relighting_request_adjusted_once(
     import processing.panorama
     from render.relighting import PanoramaControls, RelightRequest, relight_request
 
-    rotations: list[float] = []
-    rotate = processing.panorama.rotate_panorama_yaw
-
-    def counted(image: np.ndarray, yaw_deg: float) -> np.ndarray:
-        rotations.append(yaw_deg)
-        return rotate(image, yaw_deg)
-
-    monkeypatch.setattr(processing.panorama, "rotate_panorama_yaw", counted)
+    rotations = counting_calls(monkeypatch, processing.panorama, "rotate_panorama_yaw", 1)
     for mode in ("paper", "best"):
         controls = session.initial.updated({"mode": mode, "yaw_deg": 23.0, "exposure": 1.5})
         frame = session.render(controls)

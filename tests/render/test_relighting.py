@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import processing.panorama
 from core.camera_model import PinholeCamera
 from core.directions import hemisphere_layout
 from core.errors import InputError
@@ -24,6 +25,7 @@ from render.relighting import (
     relight_request,
 )
 from sim.rti_capture import write_rti_capture
+from tests.call_counting import counting_calls
 from tests.sim_fields import simulated_field
 
 
@@ -118,26 +120,11 @@ def test_a_field_of_pixels_is_relit_by_the_method_chosen_under_the_panorama(
         choose_mode(field, ModeRequest(method="rbf", k=8), panorama)
 
 
-def _counting_rotations(monkeypatch: pytest.MonkeyPatch) -> list[float]:
-    """Every yaw rotation of a panorama from here on (the controls' adjustment rotates once)."""
-    import processing.panorama
-
-    rotations: list[float] = []
-    rotate = processing.panorama.rotate_panorama_yaw
-
-    def counted(image: np.ndarray, yaw_deg: float) -> np.ndarray:
-        rotations.append(yaw_deg)
-        return rotate(image, yaw_deg)
-
-    monkeypatch.setattr(processing.panorama, "rotate_panorama_yaw", counted)
-    return rotations
-
-
 def test_a_request_applies_its_controls_once(
     glossy: ReflectanceField, courtyard_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     panorama = read_panorama(courtyard_path)
-    rotations = _counting_rotations(monkeypatch)
+    rotations = counting_calls(monkeypatch, processing.panorama, "rotate_panorama_yaw", 1)
     prepared = prepare_relighting(
         glossy,
         RelightRequest(
@@ -172,7 +159,7 @@ def test_a_cache_redoes_only_what_a_request_changes(
         mode=paper,
     )
     cache = RelightingCache(glossy)
-    rotations = _counting_rotations(monkeypatch)
+    rotations = counting_calls(monkeypatch, processing.panorama, "rotate_panorama_yaw", 1)
     lit = cache.prepare(first)
     assert lit.seconds["lighting"] > 0.0 and lit.seconds["view"] > 0.0 and rotations == [45.0]
     expected = relight_request(glossy, first).image.rgb

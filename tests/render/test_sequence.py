@@ -15,6 +15,7 @@ from render.relight_mode import RelightMode, open_relighter
 from render.relighter import RelightSettings
 from render.relighting import PanoramaControls, RelightRequest, prepare_relighting
 from render.sequence import SequenceKind, relight_prepared_sequence, relight_sequence
+from tests.call_counting import counting_calls
 from tests.sim_fields import simulated_field
 
 PAPER = RelightSettings.paper_configuration(k=16)
@@ -30,21 +31,6 @@ def glossy(tmp_path_factory: pytest.TempPathFactory) -> ReflectanceField:
 @pytest.fixture(scope="module")
 def models(glossy: ReflectanceField) -> SampleModels:
     return fit_sample_models(glossy)
-
-
-def _counting(
-    monkeypatch: pytest.MonkeyPatch, module: object, name: str, argument: int = 0
-) -> list[object]:
-    """Every call of ``module.name`` from here on, by its positional ``argument``."""
-    calls: list[object] = []
-    real = getattr(module, name)
-
-    def counted(*args: object, **kwargs: object) -> object:
-        calls.append(args[argument])
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(module, name, counted)
-    return calls
 
 
 @pytest.mark.parametrize("kind", ["environment", "turntable"])
@@ -73,9 +59,9 @@ def test_a_prepared_sequence_turns_from_what_was_prepared(
         bare, panorama, camera, kind=kind, frames=3, yaw_deg=30.0, exposure=1.5
     )
     prepared = prepare_relighting(glossy, request, models=models)
-    rotations = _counting(monkeypatch, processing.panorama, "rotate_panorama_yaw", 1)
-    prefilters = _counting(monkeypatch, render.model_relight, "prefilter_panorama")
-    views = _counting(monkeypatch, type(prepared.engine), "set_view", 1)
+    rotations = counting_calls(monkeypatch, processing.panorama, "rotate_panorama_yaw", 1)
+    prefilters = counting_calls(monkeypatch, render.model_relight, "prefilter_panorama")
+    views = counting_calls(monkeypatch, type(prepared.engine), "set_view", 1)
     frames = relight_prepared_sequence(prepared, kind=kind, frames=3)
     assert all(np.array_equal(a, b) for a, b in zip(frames, expected, strict=True))
     # Frame 0 is the engine as prepared: no yaw, view or pre-filter redone; each next yaw
@@ -102,7 +88,7 @@ def test_the_precomputed_lighting_shows_the_adjusted_panorama(
         mode=PRECOMPUTED,
     )
     prepared = prepare_relighting(glossy, request, models=models)
-    rotations = _counting(monkeypatch, processing.panorama, "rotate_panorama_yaw", 1)
+    rotations = counting_calls(monkeypatch, processing.panorama, "rotate_panorama_yaw", 1)
     shown = prepared.engine.environment
     # The request's adjustment, not the panorama adjusted again when read.
     assert shown is prepared.environment and shown.panorama is prepared.seen
