@@ -21,7 +21,7 @@ from core.sample_data import panorama_path, rti_capture_path
 
 if TYPE_CHECKING:
     from processing.panorama import Panorama
-    from render.relight_mode import RelightMode
+    from render.engines.modes import RelightMode
 
 __all__ = ["DEMO_KS", "run_demo"]
 
@@ -87,9 +87,9 @@ def _relight_demo(out: Path, panorama: Panorama, quick: bool) -> list[str]:
 
     from core.field_store import ReflectanceField
     from core.image_io import write_srgb8
+    from render.engines.interpolated import RelightSettings, best_settings
+    from render.engines.modes import most_accurate_mode, open_relighter
     from render.output import display_picture, write_sequence
-    from render.relight_mode import most_accurate_mode, open_relighter
-    from render.relighter import RelightSettings, best_settings
     from render.relighting import RelightRequest, prepare_relighting
     from render.sequence import relight_sequence
     from render.tonemap import auto_exposure

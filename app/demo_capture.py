@@ -20,7 +20,7 @@ from core.errors import RigError
 
 if TYPE_CHECKING:
     from processing.panorama import Panorama
-    from render.relighter import RelitImage
+    from render.engines.interpolated import RelitImage
     from sim.synthetic_camera import SyntheticImage
 
 __all__ = ["capture_demo"]
@@ -179,10 +179,10 @@ def _relight_captured(out: Path, field_path: Path, panorama: Panorama, quick: bo
     """Relight the captured field at several K and views; pictures, a contact sheet, errors."""
     from core.field_store import ReflectanceField
     from core.image_io import write_srgb8
-    from render.model_relight import ModelRelightSettings
+    from render.engines.interpolated import RelightSettings
+    from render.engines.models import ModelRelightSettings
+    from render.engines.modes import RelightMode, most_accurate_mode
     from render.output import display_picture
-    from render.relight_mode import RelightMode, most_accurate_mode
-    from render.relighter import RelightSettings
     from render.relighting import RelightRequest, relight_request
     from render.tonemap import auto_exposure
     from sim.ground_truth import render_environment

@@ -28,8 +28,8 @@ from core.field_store import ReflectanceField
 from processing.panorama import Panorama
 from processing.sample_models import SampleModels
 from render.advisor import Advisor
-from render.relight_mode import open_relighter
-from render.relighter import RelitImage
+from render.engines.interpolated import RelitImage
+from render.engines.modes import open_relighter
 
 __all__ = ["TrueError", "advisor_chart", "format_advisor", "simulator_error", "validate_advisor"]
 

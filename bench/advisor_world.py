@@ -36,7 +36,7 @@ from processing.image_quality import relative_rmse_values
 from processing.panorama import Panorama, downsample_panorama, panorama_from_array, read_panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import PARAMETRIC_MODELS
-from render.relighter import RelitImage
+from render.engines.interpolated import RelitImage
 from sim.field import field_cameras
 from sim.world.files import WORLDS, World, load_world
 from sim.world.mitsuba import render_world_field

@@ -11,7 +11,7 @@ neither the fit nor the advice saw; a test light is a sun of its own):
     the models, which the guards advised unconditionally before;
 ``new advice``
     what the guard advises now: the models only where the field's own held-out comparison
-    (:class:`render.relight_mode.HeldOutComparison`, every other fit light held out) found
+    (:class:`render.engines.modes.HeldOutComparison`, every other fit light held out) found
     them better, else to keep interpolating and capture more.
 
 Datasets are labelled as in :mod:`bench.held_out`: the real capture, path-traced RTI domes and
@@ -40,12 +40,12 @@ from core.sample_data import panorama_path, rti_capture_path
 from processing.panorama import read_panorama
 from processing.rti import open_field_or_rti
 from processing.sample_models import fit_sample_models
+from render.engines.interpolated import best_settings
+from render.engines.modes import HeldOutComparison, most_accurate_mode
 from render.evaluation import evaluate
 from render.guards import relight_warnings
 from render.held_out_lights import test_field_from_lp
 from render.light_splits import split_lights
-from render.relight_mode import HeldOutComparison, most_accurate_mode
-from render.relighter import best_settings
 from sim.skies import procedural_sky
 
 __all__ = [

@@ -27,8 +27,8 @@ from core.sample_data import PANORAMA_NAMES, panorama_path
 from processing.image_quality import relative_rmse_values
 from processing.panorama import read_panorama
 from processing.sample_model_store import models_for_field
-from render.model_relight import ModelRelightSettings
-from render.relighter import RelitImage
+from render.engines.interpolated import RelitImage
+from render.engines.models import ModelRelightSettings
 from sim.field import field_cameras, simulate_field
 
 __all__ = ["main", "relative_rmse"]

@@ -23,11 +23,11 @@ from core.image_io import encode_picture
 from core.point_spacing import point_spacing
 from core.sample_data import panorama_path
 from processing.panorama import read_panorama
+from render.engines.interpolated import RelightSettings
+from render.engines.modes import most_accurate_mode
+from render.engines.paper_sums import blend_cameras
 from render.field_view import FieldView
 from render.live_session import LIVE_MODES, LiveFrame, LiveSession
-from render.relight import blend_cameras
-from render.relight_mode import most_accurate_mode
-from render.relighter import RelightSettings
 from sim.field import field_cameras, simulate_field
 
 __all__ = ["main", "time_session"]

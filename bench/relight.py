@@ -33,17 +33,17 @@ from core.sample_data import PANORAMA_NAMES, PanoramaName, panorama_path
 from processing.panorama import Panorama, panorama_from_array, read_panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import SampleModels, choose_model, interpolation_loo
-from render.light_weights import pixel_light_weights
-from render.model_relight import ModelRelighter, ModelRelightSettings
-from render.relight import (
+from render.engines.interpolated import Relighter, RelightSettings
+from render.engines.models import ModelRelighter, ModelRelightSettings
+from render.engines.modes import MOST_ACCURATE_MODELS, RelightEngine, RelightMode, open_relighter
+from render.engines.paper_sums import (
     blend_cameras,
     blend_field,
     relight,
     relight_pixels_literal,
     relight_view,
 )
-from render.relight_mode import MOST_ACCURATE_MODELS, RelightEngine, RelightMode, open_relighter
-from render.relighter import Relighter, RelightSettings
+from render.light_weights import pixel_light_weights
 from render.splat import splat
 from sim.scenes import build_scene, get_scene
 

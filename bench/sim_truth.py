@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from core.camera_model import PinholeCamera
 from core.light_set import grid_lights
 from processing.image_quality import relative_rmse_values
-from render.relighter import RelitImage
+from render.engines.interpolated import RelitImage
 from sim.field import field_cameras, simulate_field
 from sim.ground_truth import shade_environment, shade_environment_views
 from sim.scenes import SurfaceSamples

@@ -4,11 +4,12 @@ Run: ``python -m bench.stability -o DIR [--quick]``. For every case (a sun with 
 sun's highlight on a sparse field, views outside the cameras or grazing, an LDR panorama, a
 saturated or noisy capture, an empty camera, a missing camera pose) a small simulated field is
 relit in a failing and in a benign configuration by the best interpolation
-(:func:`render.relighter.best_settings`), the paper's configuration and the per-sample models
-(:data:`render.relight_mode.MOST_ACCURATE_MODELS`); each row holds the relative RMSE against
-the simulator's ground truth and the codes of the warnings :func:`render.guards.relight_warnings`
-gives for that relighting (what ``rig relight`` prints). Writes ``DIR/stability.json`` and the
-table ``DIR/stability.md``; fields are simulated into ``DIR/fields/`` once and reused.
+(:func:`render.engines.interpolated.best_settings`), the paper's configuration and the
+per-sample models (:data:`render.engines.modes.MOST_ACCURATE_MODELS`); each row holds the
+relative RMSE against the simulator's ground truth and the codes of the warnings
+:func:`render.guards.relight_warnings` gives for that relighting (what ``rig relight``
+prints). Writes ``DIR/stability.json`` and the table ``DIR/stability.md``; fields are
+simulated into ``DIR/fields/`` once and reused.
 """
 
 from __future__ import annotations
@@ -36,9 +37,9 @@ from core.sample_data import panorama_path
 from processing.field_layout import field_layout
 from processing.panorama import panorama_from_array, read_panorama
 from processing.sample_models import SampleModels, fit_sample_models
+from render.engines.interpolated import RelightSettings, best_settings
+from render.engines.modes import MOST_ACCURATE_MODELS, RelightMode, open_relighter
 from render.guards import relight_warnings
-from render.relight_mode import MOST_ACCURATE_MODELS, RelightMode, open_relighter
-from render.relighter import RelightSettings, best_settings
 from sim.field import field_cameras, simulate_field
 from sim.scenes import build_scene, get_scene
 from sim.sensor import Sensor, expose, radiance_from_dn

@@ -16,7 +16,7 @@ import numpy as np
 
 from core.camera_model import PinholeCamera
 from processing.panorama import Panorama
-from render.relight_mode import RelightEngine
+from render.engines.modes import RelightEngine
 
 __all__ = ["copy_bandwidth", "loop_ms", "median_ms"]
 

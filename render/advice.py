@@ -15,9 +15,9 @@ from dataclasses import dataclass, replace
 
 from core.errors import InputError
 from processing.sample_models import PARAMETRIC_MODELS
-from render.model_relight import ModelRelightSettings
-from render.relight_mode import RelightMode
-from render.relighter import Predictor, RelightSettings
+from render.engines.interpolated import Predictor, RelightSettings
+from render.engines.models import ModelRelightSettings
+from render.engines.modes import RelightMode
 
 __all__ = [
     "EXACT_GRID",
@@ -51,12 +51,12 @@ class Candidate:
 
     @property
     def light_predictor(self) -> Predictor:
-        """What predicts an unmeasured light (see :data:`render.relighter.Predictor`)."""
+        """What predicts an unmeasured light (see :data:`render.engines.interpolated.Predictor`)."""
         return self.mode.predictors()[0]
 
     @property
     def view_predictor(self) -> Predictor:
-        """What predicts an uncaptured view (see :data:`render.relighter.Predictor`)."""
+        """What predicts an uncaptured view (see :data:`render.engines.interpolated.Predictor`)."""
         return self.mode.predictors()[1]
 
     @property

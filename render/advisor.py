@@ -56,11 +56,11 @@ from render.advice import (
     capture_density,
     default_candidates,
 )
+from render.engines.interpolated import Predictor
+from render.engines.models import ModelRelighter, ModelRelightSettings
+from render.engines.modes import RelightEngine, RelightMode
+from render.engines.paper_sums import blend_cameras, relight
 from render.light_weights import LightWeights, projection_light_weights
-from render.model_relight import ModelRelighter, ModelRelightSettings
-from render.relight import blend_cameras, relight
-from render.relight_mode import RelightEngine, RelightMode
-from render.relighter import Predictor
 
 __all__ = [
     "Advice",

@@ -31,7 +31,7 @@ from core.field_store import ReflectanceField, is_field_store
 from core.progress import progress_bar
 from processing.panorama import read_panorama
 from processing.sample_model_store import read_sample_models
-from render.relight_mode import RelightMode, open_relighter
+from render.engines.modes import RelightMode, open_relighter
 from render.sequence import SequenceKind, relight_sequence
 
 __all__ = ["BatchPlan", "read_batch_frames", "relight_batch"]

@@ -21,8 +21,8 @@ does much better under a broad sky than under a sun. The choice therefore looks 
 The winner is refitted on every light and relights through its engine: the light-stage sum is
 ``RelightSettings(scheme="projection")`` (each measured image weighted by the light of its
 Voronoi cell, Debevec et al. 2000), barycentric interpolation the ``pixels`` scheme, the fitted
-model alone :data:`render.relight_mode.MOST_ACCURATE_MODELS`, any other predictor
-:class:`render.predictor_relight.PredictorRelightSettings`.
+model alone :data:`render.engines.modes.MOST_ACCURATE_MODELS`, any other predictor
+:class:`render.engines.predicted.PredictorRelightSettings`.
 """
 
 from __future__ import annotations
@@ -45,11 +45,11 @@ from processing.lights import disassemble_lights
 from processing.measured_region import MeasuredRegion
 from processing.panorama import Panorama
 from processing.sample_models import SampleModels
+from render.engines.interpolated import RelightSettings
+from render.engines.modes import MOST_ACCURATE_MODELS, RelightMode
+from render.engines.predicted import PredictorRelightSettings
 from render.light_prediction import make_predictor
 from render.light_splits import lowest_lights, split_lights
-from render.predictor_relight import PredictorRelightSettings
-from render.relight_mode import MOST_ACCURATE_MODELS, RelightMode
-from render.relighter import RelightSettings
 from render.rung_choice import GAP_EXPONENT
 
 __all__ = [

@@ -5,7 +5,7 @@ Plain-language warnings for the cases where relighting is known to go wrong.
 Each guard looks at the inputs only (the field's light and camera layout, its fitted lobes, the
 view, the panorama) and says what to expect and what fixes it. Where the fix might be to relight
 through the per-sample models, the advice follows the field's own held-out comparison
-(:class:`render.relight_mode.HeldOutComparison`): the models are advised only where they predicted
+(:class:`render.engines.modes.HeldOutComparison`): the models are advised only where they predicted
 lights they never saw better than interpolation did, and the figures are quoted. On a world no
 model contains, the old unconditional advice made results worse where it fired (``python -m
 bench.guard_advice``, docs/evaluation.md). The thresholds come from the
@@ -33,7 +33,7 @@ from processing.interpolation import mean_spacing_deg
 from processing.measured_region import MeasuredRegion
 from processing.panorama import downsample_panorama
 from processing.sample_models import ParametricFit, SampleModels, choose_model
-from render.relight_mode import HeldOutComparison, RelightMode
+from render.engines.modes import HeldOutComparison, RelightMode
 
 __all__ = [
     "RelightWarning",
@@ -601,7 +601,7 @@ def relight_warnings(
     mode : RelightMode
     models : SampleModels or None, the field's fit (its lobe and LOO error inform the guards)
     comparison : HeldOutComparison, optional, the models against interpolation on held-out
-        lights (:class:`render.relight_mode.ModeChoice`): the advice to relight through the
+        lights (:class:`render.engines.modes.ModeChoice`): the advice to relight through the
         models is given only where they won
     """
     found = [clipped_panorama_warning(rgb), empty_camera_warning(field)]

@@ -1,7 +1,7 @@
 """How much light each measured light direction must carry: the W of the relighting sums.
 
-Relit radiance is sum_t W_t F[t, p] (per camera, see :mod:`render.relight`); the schemes differ
-in how an environment becomes W (T, 3), in irradiance:
+Relit radiance is sum_t W_t F[t, p] (per camera, see :mod:`render.engines.paper_sums`); the
+schemes differ in how an environment becomes W (T, 3), in irradiance:
 
 - ``sampled`` (paper eq. 3): the environment's K sampled lights (a ``LightSet``), each spread
   over the measured lights by the interpolation weights: W_t = sum_k E_k w(l_k, t).

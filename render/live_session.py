@@ -4,7 +4,7 @@ A live relighting session: the viewer's state, and one frame per change of its c
 
 The browser viewer (``rig view``) is a page over this class. The session holds the field, the
 two modes a person switches between (the paper's configuration and the mode chosen for the
-field by held-out lights, :func:`render.relight_mode.most_accurate_mode`) and the loaded
+field by held-out lights, :func:`render.engines.modes.most_accurate_mode`) and the loaded
 panoramas and modulation maps. Each frame is a :class:`render.relighting.RelightRequest` run
 through the library's relighting, as ``rig relight`` runs one, kept in a
 :class:`render.relighting.RelightingCache` so that a change costs what it changes: a new yaw,
@@ -38,11 +38,11 @@ from processing.environment import EnvironmentLighting
 from processing.image_quality import relative_rmse_values
 from processing.panorama import Panorama
 from processing.sampling import SAMPLERS, SamplerName
-from render.model_relight import ModelRelightSettings
+from render.engines.interpolated import RelightSettings, RelitImage
+from render.engines.models import ModelRelightSettings
+from render.engines.modes import ModeChoice, RelightMode
 from render.output import display_picture
 from render.overlay import sample_overlay
-from render.relight_mode import ModeChoice, RelightMode
-from render.relighter import RelightSettings, RelitImage
 from render.relighting import (
     LitRelighting,
     PanoramaControls,

@@ -1,6 +1,6 @@
 """Per-sample models relit at frame rate: what depends on the samples is computed once.
 
-The exact model relighting (:func:`render.model_relight.relight_models`) sums every light of a
+The exact model relighting (:func:`render.engines.models.relight_models`) sums every light of a
 64 x 128 grid for every sample: about 2 s per lighting at 50,000 points. Here the sum is split
 the way real-time renderers split it, so that a new yaw or exposure costs a few small dot
 products per sample:
@@ -360,7 +360,7 @@ def sample_transfer(
     ----------
     normals : ndarray, shape (P, 3), the fitted normals
     source : ndarray, shape (P,), int64, whose marks each sample uses
-        (:func:`render.model_relight.fill_sources`)
+        (:func:`render.engines.models.fill_sources`)
     lit : ndarray, shape (P, M), uint8, the shadow marks at ``mark_directions``
     mark_directions : ndarray, shape (M, 3), unit vectors (rig frame)
     reaches : ndarray, shape (3,), optional; light from w reaches the samples only where
@@ -403,7 +403,7 @@ def _bilinear(
     return top * (1.0 - fr) + bottom * fr
 
 
-# The fit's arrays one by one on purpose, as render.model_relight's kernel takes them: numba
+# The fit's arrays one by one on purpose, as render.engines.models's kernel takes them: numba
 # kernels take arrays and scalars, not a ParametricFit, a SampleTransfer or a prefilter.
 @numba.njit(cache=True, parallel=True)
 def shade_precomputed(

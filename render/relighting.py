@@ -11,7 +11,7 @@ at the request's view; :func:`relight_request` renders it. A program that religh
 after request on one field (the viewer) keeps a :class:`RelightingCache`, the same steps with
 what did not change kept: the adjusted panorama, the chosen mode, the engines (their models,
 precomputation and lighting) and their views. The engines themselves are
-:mod:`render.relight_mode`'s.
+:mod:`render.engines.modes`'s.
 """
 
 from __future__ import annotations
@@ -35,11 +35,9 @@ from processing.sample_model_store import (
 )
 from processing.sample_models import SampleModels
 from processing.sampling import SamplerName
-from render.engine_lighting import AdjustedPanorama, PanoramaControls, PanoramaLitEngine
-from render.environment_choice import CandidateScore, choose_environment_mode, environment_mode
-from render.guards import RelightWarning, relight_warnings
-from render.model_relight import ModelLightingMode, ModelRelighter, ModelRelightSettings
-from render.relight_mode import (
+from render.engines.interpolated import RelightSettings, RelitImage, Scheme
+from render.engines.models import ModelLightingMode, ModelRelighter, ModelRelightSettings
+from render.engines.modes import (
     MOST_ACCURATE_MODELS,
     HeldOutComparison,
     RelightEngine,
@@ -47,7 +45,9 @@ from render.relight_mode import (
     most_accurate_mode,
     open_relighter,
 )
-from render.relighter import RelightSettings, RelitImage, Scheme
+from render.engines.panorama_lit import AdjustedPanorama, PanoramaControls, PanoramaLitEngine
+from render.environment_choice import CandidateScore, choose_environment_mode, environment_mode
+from render.guards import RelightWarning, relight_warnings
 
 __all__ = [
     "ChosenMode",
@@ -76,7 +76,7 @@ class ModeRequest:
     With nothing set, a field of pixels is relit by the method that predicts held-out lights
     best under this panorama (:func:`render.environment_choice.choose_environment_mode`), a
     field of points by the better of its models and interpolation on held-out lights
-    (:func:`render.relight_mode.most_accurate_mode`).
+    (:func:`render.engines.modes.most_accurate_mode`).
 
     Attributes
     ----------

@@ -1,7 +1,7 @@
 """Relit sequences: the environment turning around the object, or the object on a turntable.
 
 Every frame's lighting goes through the controls' one adjustment
-(:meth:`render.engine_lighting.PanoramaControls.adjusted`, handed to the engine's
+(:meth:`render.engines.panorama_lit.PanoramaControls.adjusted`, handed to the engine's
 ``take_lighting``): an environment sequence turns the yaw of the first frame's controls, the
 visible panorama adjusted anew, never the engine's lights. A prepared request
 (:func:`relight_prepared_sequence`) is its own frame 0: what ``prepare_relighting`` lit and set
@@ -22,9 +22,9 @@ from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.progress import progress_bar
 from processing.panorama import Panorama
-from render.engine_lighting import AdjustedPanorama, PanoramaControls, PanoramaLitEngine
+from render.engines.modes import RelightEngine
+from render.engines.panorama_lit import AdjustedPanorama, PanoramaControls, PanoramaLitEngine
 from render.output import display_picture
-from render.relight_mode import RelightEngine
 from render.relighting import PreparedRelighting
 from render.tonemap import auto_exposure
 
@@ -49,7 +49,7 @@ def relight_sequence(
 ) -> list[NDArray[np.uint8]]:
     """Tone-mapped frames of a full turn in ``frames`` equal steps, lit and set here.
 
-    For an engine opened bare (``render.relight_mode.open_relighter``); an engine that
+    For an engine opened bare (``render.engines.modes.open_relighter``); an engine that
     :func:`render.relighting.prepare_relighting` lit and set is
     :func:`relight_prepared_sequence`'s.
 

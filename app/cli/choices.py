@@ -41,7 +41,7 @@ MODELS = ("lambert", "lambert+ggx", "ptm", "hsh2", "hsh3")
 #: :data:`render.evaluation.CHOSEN`: the automatic choices ``rig evaluate`` also scores.
 CHOSEN = ("auto", "auto-fast")
 
-#: :data:`render.relighter.SCHEMES`: how a panorama lights a field (interpolation modes).
+#: :data:`render.engines.interpolated.SCHEMES`: how a panorama lights a field (interpolation modes).
 SCHEMES = ("sampled", "pixels", "projection")
 
 #: :data:`render.light_splits.SPLITS`: the ways of holding out a field's own lights.
@@ -50,7 +50,7 @@ SPLITS = ("every-other", "rings", "random")
 #: :data:`render.sequence.SEQUENCES`: what turns in a relit sequence.
 SEQUENCES = ("environment", "turntable")
 
-#: ``render.relight_mode.MOST_ACCURATE_MODELS.grid_height``: the grid the models sum a
+#: ``render.engines.modes.MOST_ACCURATE_MODELS.grid_height``: the grid the models sum a
 #: panorama into by default.
 MODEL_GRID_HEIGHT = 64
 

@@ -2,7 +2,7 @@
 
 Application layer: maps the flags to a relighting mode (the choice under the panorama for a
 field of pixels, :mod:`render.environment_choice`; the models or interpolation for a field of
-points, :mod:`render.relight_mode`), prints the guards' warnings and writes the image or the
+points, :mod:`render.engines.modes`), prints the guards' warnings and writes the image or the
 sequence. ``--lights`` is :func:`app.cli.evaluate.relight_lights`.
 """
 

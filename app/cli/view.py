@@ -80,8 +80,8 @@ def open_session(
 
     ``report(status)``, when given, is told each stage as it starts (the viewer's page shows it).
     """
+    from render.engines.modes import most_accurate_mode
     from render.live_session import LiveSession
-    from render.relight_mode import most_accurate_mode
     from sim.ground_truth import field_truth
 
     def stage(status: str) -> None:

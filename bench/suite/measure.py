@@ -24,8 +24,8 @@ from bench.suite.results import Row, Score
 from bench.timing import loop_ms
 from core.colour import linear_to_srgb
 from core.field_store import ReflectanceField
-from render.relight_mode import RelightMode, open_relighter
-from render.relighter import RelitImage
+from render.engines.interpolated import RelitImage
+from render.engines.modes import RelightMode, open_relighter
 
 __all__ = ["MethodRows", "engine_bytes", "measure_method", "score", "ssim"]
 

@@ -13,10 +13,10 @@ from bench.suite.results import ConfigRecord, ModeRecord
 from core.errors import InputError
 from processing.interpolation import InterpolationMethod
 from processing.sampling import SamplerName
+from render.engines.interpolated import RelightSettings
+from render.engines.models import ModelRelightSettings
+from render.engines.modes import MOST_ACCURATE_MODELS, RelightMode
 from render.light_prediction import PREDICTORS
-from render.model_relight import ModelRelightSettings
-from render.relight_mode import MOST_ACCURATE_MODELS, RelightMode
-from render.relighter import RelightSettings
 
 __all__ = [
     "CHAIN_K",

@@ -36,9 +36,9 @@ from core.sample_data import panorama_path
 from processing.panorama import Panorama, read_panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import SampleModels
-from render.model_relight import ModelRelightSettings
-from render.relight_mode import RelightEngine, RelightMode, most_accurate_mode, open_relighter
-from render.relighter import Relighter, RelightSettings
+from render.engines.interpolated import Relighter, RelightSettings
+from render.engines.models import ModelRelightSettings
+from render.engines.modes import RelightEngine, RelightMode, most_accurate_mode, open_relighter
 
 __all__ = [
     "FRAME_BUDGET_MS",

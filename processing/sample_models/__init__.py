@@ -3,7 +3,7 @@
 Interpolating a reflectance field linearly between its T measured lights and S cameras (the
 paper's eq. 1-3) blurs everything finer than the light spacing: a 30-light rig misses a GGX
 lobe of roughness 0.2 by 13-20 %. Here every surface sample gets a small model fitted to all of
-its measured values, and relighting goes through the model (:mod:`render.model_relight`). The
+its measured values, and relighting goes through the model (:mod:`render.engines.models`). The
 model of a field is chosen by its error on held-out measured lights (leave one light out,
 "LOO"), never by ground truth, so the choice works on real captures too.
 

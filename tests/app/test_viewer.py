@@ -34,9 +34,9 @@ from core.colour import luminance
 from core.directions import hemisphere_layout
 from core.field_store import FieldStoreWriter, ReflectanceField
 from core.sample_data import panorama_path
+from render.engines.modes import open_relighter
 from render.live_session import LiveSession
 from render.output import display_picture
-from render.relight_mode import open_relighter
 from sim.field import field_cameras, simulate_field
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

@@ -7,8 +7,8 @@ import pytest
 from bench.suite.product import bench_loop, interactive_record, interactive_variant
 from core.field_store import ReflectanceField
 from processing.sample_model_store import models_for_field
-from render.model_relight import ModelRelightSettings
-from render.relighter import RelightSettings
+from render.engines.interpolated import RelightSettings
+from render.engines.models import ModelRelightSettings
 from sim.field import field_cameras, simulate_field
 
 

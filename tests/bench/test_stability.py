@@ -24,8 +24,8 @@ from bench.stability import (
 from core.colour import luminance
 from core.directions import panorama_solid_angles
 from core.field_store import ReflectanceField
-from render.relight_mode import MOST_ACCURATE_MODELS
-from render.relighter import RelightSettings, best_settings
+from render.engines.interpolated import RelightSettings, best_settings
+from render.engines.modes import MOST_ACCURATE_MODELS
 from sim.skies import procedural_sky
 
 TINY = Sizes(points=200, image=16)

@@ -20,8 +20,8 @@ from core.sample_data import panorama_path, rti_capture_path
 from processing.panorama import read_panorama
 from processing.process_dataset import process_dataset
 from processing.rti import open_field_or_rti
-from render.relight_mode import most_accurate_mode, open_relighter
-from render.relighter import RelightSettings
+from render.engines.interpolated import RelightSettings
+from render.engines.modes import most_accurate_mode, open_relighter
 from sim.capture_sources import simulated_capture_sources
 from sim.field import field_cameras, simulate_field
 from sim.ground_truth import render_environment

@@ -10,9 +10,9 @@ from core.field_store import ReflectanceField
 from core.light_set import grid_lights
 from processing.panorama import Panorama, read_panorama
 from render.advisor import Advice, Advisor, Candidate, capture_density
-from render.model_relight import ModelRelightSettings
-from render.relight_mode import open_relighter
-from render.relighter import RelightSettings
+from render.engines.interpolated import RelightSettings
+from render.engines.models import ModelRelightSettings
+from render.engines.modes import open_relighter
 from sim.field import field_cameras, simulate_field
 from sim.ground_truth import shade_environment
 from sim.scenes import build_scene

@@ -17,7 +17,7 @@ from core.cluster import dask_client
 from core.errors import InputError
 from core.sample_data import panorama_path
 from render.batch import BatchPlan, read_batch_frames, relight_batch
-from render.relighter import RelightSettings
+from render.engines.interpolated import RelightSettings
 from sim.field import field_cameras, simulate_field
 from tests.cluster_faults import kill_a_worker_mid_run
 
@@ -104,7 +104,7 @@ def test_an_existing_output_and_a_model_mode_without_a_fit_are_refused(
     (tmp_path / "frames.zarr").mkdir()
     with pytest.raises(InputError, match="exists"):
         relight_batch(_plan(store), tmp_path / "frames.zarr")
-    from render.relight_mode import MOST_ACCURATE_MODELS
+    from render.engines.modes import MOST_ACCURATE_MODELS
 
     with pytest.raises(InputError, match="saved fit"):
         BatchPlan(**{**_plan(store).__dict__, "mode": MOST_ACCURATE_MODELS})

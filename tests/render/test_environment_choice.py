@@ -9,6 +9,7 @@ from core.directions import hemisphere_layout, panorama_solid_angles
 from core.field_store import ReflectanceField
 from processing.panorama import block_below_horizon, panorama_from_array, visible_environment
 from processing.rti import import_rti
+from render.engines.predicted import PredictorRelightSettings
 from render.environment_choice import (
     ENVIRONMENT_CANDIDATES,
     LIGHT_STAGE,
@@ -16,7 +17,6 @@ from render.environment_choice import (
     environment_mode,
     held_out_splits,
 )
-from render.predictor_relight import PredictorRelightSettings
 from sim.rti_capture import write_rti_capture
 
 ALBEDO = 0.6

@@ -12,6 +12,7 @@ from core.directions import hemisphere_layout, panorama_directions
 from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.panorama import read_panorama
 from processing.sample_models import fit_sample_models
+from render.engines.modes import HeldOutComparison
 from render.evaluation import HeldOutError
 from render.guards import (
     SUN_SHARE,
@@ -30,7 +31,6 @@ from render.guards import (
     sun_warning,
     view_warning,
 )
-from render.relight_mode import HeldOutComparison
 from sim.field import field_cameras, simulate_field
 from sim.scenes import build_scene
 from sim.skies import ldr_photo, procedural_sky

@@ -8,8 +8,8 @@ import pytest
 from core.errors import InputError
 from core.field_store import ReflectanceField
 from processing.panorama import Panorama, read_panorama
+from render.engines.modes import most_accurate_mode
 from render.live_session import LiveControls, LiveSession, error_picture
-from render.relight_mode import most_accurate_mode
 from sim.field import field_cameras, simulate_field
 from sim.ground_truth import field_truth
 from tests.call_counting import counting_calls

@@ -21,13 +21,13 @@ from processing.sample_models import (
     evaluate_basis,
     fit_sample_models,
 )
-from render.model_relight import (
+from render.engines.interpolated import Relighter, RelightSettings
+from render.engines.models import (
     ModelRelighter,
     ModelRelightSettings,
     prepare_lighting,
     relight_models,
 )
-from render.relighter import Relighter, RelightSettings
 from sim.ground_truth import render_environment, shade_environment
 from sim.scenes import build_scene
 from tests.sim_fields import peak_seen, simulated_field

@@ -12,7 +12,7 @@ from core.field_store import ReflectanceField
 from core.light_set import LightSet
 from processing.panorama import Panorama, adjust_panorama, read_panorama
 from processing.sample_model_store import models_for_field
-from render.model_relight import ModelRelightSettings
+from render.engines.models import ModelRelightSettings
 from render.precomputed_lighting import (
     ALPHAS,
     lobe_albedo,

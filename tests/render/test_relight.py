@@ -12,13 +12,13 @@ from core.field_store import FieldStoreWriter, ReflectanceField
 from core.light_set import LightSet
 from processing.interpolation import interpolation_weights
 from processing.panorama import panorama_from_array
+from render.engines.interpolated import Relighter, RelightSettings
+from render.engines.paper_sums import blend_cameras, relight, relight_pixels_literal
 from render.light_weights import (
     pixel_light_weights,
     projection_light_weights,
     sampled_light_weights,
 )
-from render.relight import blend_cameras, relight, relight_pixels_literal
-from render.relighter import Relighter, RelightSettings
 from sim.field import field_cameras, simulate_field
 
 

@@ -10,9 +10,9 @@ from core.directions import hemisphere_layout
 from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.panorama import read_panorama
 from processing.sample_model_store import default_models_path
-from render.model_relight import ModelRelighter, ModelRelightSettings
-from render.relight_mode import MOST_ACCURATE_MODELS, most_accurate_mode, open_relighter
-from render.relighter import Relighter, RelightSettings
+from render.engines.interpolated import Relighter, RelightSettings
+from render.engines.models import ModelRelighter, ModelRelightSettings
+from render.engines.modes import MOST_ACCURATE_MODELS, most_accurate_mode, open_relighter
 from sim.field import field_cameras, simulate_field
 
 

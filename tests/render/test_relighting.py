@@ -13,9 +13,9 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from processing.panorama import adjust_panorama, read_panorama, visible_environment
 from processing.rti import import_rti
+from render.engines.interpolated import RelightSettings
+from render.engines.modes import MOST_ACCURATE_MODELS, most_accurate_mode, open_relighter
 from render.environment_choice import choose_environment_mode
-from render.relight_mode import MOST_ACCURATE_MODELS, most_accurate_mode, open_relighter
-from render.relighter import RelightSettings
 from render.relighting import (
     ModeRequest,
     PanoramaControls,
@@ -147,7 +147,7 @@ def test_a_request_applies_its_controls_once(
 def test_a_cache_redoes_only_what_a_request_changes(
     glossy: ReflectanceField, courtyard_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from render.model_relight import ModelRelightSettings
+    from render.engines.models import ModelRelightSettings
     from render.relighting import RelightingCache
 
     panorama = read_panorama(courtyard_path)

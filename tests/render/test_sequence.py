@@ -10,9 +10,9 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from processing.panorama import read_panorama
 from processing.sample_models import SampleModels, fit_sample_models
-from render.model_relight import ModelRelightSettings
-from render.relight_mode import RelightMode, open_relighter
-from render.relighter import RelightSettings
+from render.engines.interpolated import RelightSettings
+from render.engines.models import ModelRelightSettings
+from render.engines.modes import RelightMode, open_relighter
 from render.relighting import PanoramaControls, RelightRequest, prepare_relighting
 from render.sequence import SequenceKind, relight_prepared_sequence, relight_sequence
 from tests.call_counting import counting_calls
@@ -44,7 +44,7 @@ def test_a_prepared_sequence_turns_from_what_was_prepared(
     mode: RelightMode,
 ) -> None:
     import processing.panorama
-    import render.model_relight
+    import render.engines.models
 
     panorama = read_panorama(courtyard_path)
     camera = PinholeCamera(20.0, 45.0, width=32, height=32)
@@ -60,7 +60,7 @@ def test_a_prepared_sequence_turns_from_what_was_prepared(
     )
     prepared = prepare_relighting(glossy, request, models=models)
     rotations = counting_calls(monkeypatch, processing.panorama, "rotate_panorama_yaw", 1)
-    prefilters = counting_calls(monkeypatch, render.model_relight, "prefilter_panorama")
+    prefilters = counting_calls(monkeypatch, render.engines.models, "prefilter_panorama")
     views = counting_calls(monkeypatch, type(prepared.engine), "set_view", 1)
     frames = relight_prepared_sequence(prepared, kind=kind, frames=3)
     assert all(np.array_equal(a, b) for a, b in zip(frames, expected, strict=True))

@@ -103,7 +103,7 @@ def test_every_help_is_printed_without_importing_the_library() -> None:
         ("MODELS", "processing.sample_models", "MODELS"),
         ("PREDICTORS", "render.light_prediction", "PREDICTORS"),
         ("CHOSEN", "render.evaluation", "CHOSEN"),
-        ("SCHEMES", "render.relighter", "SCHEMES"),
+        ("SCHEMES", "render.engines.interpolated", "SCHEMES"),
         ("SPLITS", "render.light_splits", "SPLITS"),
         ("SEQUENCES", "render.sequence", "SEQUENCES"),
         ("WEB_MODELS", "render.web_export", "WEB_MODELS"),
@@ -124,7 +124,7 @@ def test_the_web_exports_numbers_are_the_library_ones() -> None:
 
 
 def test_the_models_default_grid_is_the_library_one() -> None:
-    from render.relight_mode import MOST_ACCURATE_MODELS
+    from render.engines.modes import MOST_ACCURATE_MODELS
 
     assert cli_choices.MODEL_GRID_HEIGHT == MOST_ACCURATE_MODELS.grid_height
 

@@ -1,7 +1,7 @@
 """Environment relighting through any light predictor: each grid light of the panorama predicted.
 
-The linear schemes (:mod:`render.relighter`) weight the measured images; the model engine
-(:mod:`render.model_relight`) shades fitted BRDFs. This engine relights through any
+The linear schemes (:mod:`render.engines.interpolated`) weight the measured images; the model engine
+(:mod:`render.engines.models`) shades fitted BRDFs. This engine relights through any
 :class:`render.prediction_methods.LightPredictor` (the learned rung, a model plus its residual,
 the adaptive mixture, PTM/HSH): the panorama is summed exactly into grid blocks, one light at
 each block's energy-weighted centroid (:func:`core.light_set.grid_lights`), and the field's
@@ -16,7 +16,7 @@ carries the residual at the measured lights (``<model>+residual``, ``adaptive``)
 every measured image, so what it adds is only where the lights were not measured.
 
 Fields of pixels (one fixed view, RTI captures) only: a field of points relights through its
-models (:mod:`render.model_relight`) or the linear schemes, which blend cameras for new views.
+models (:mod:`render.engines.models`) or the linear schemes, which blend cameras for new views.
 """
 
 from __future__ import annotations
@@ -34,11 +34,11 @@ from core.light_set import LightSet
 from processing.environment import EnvironmentLighting, LightingControls
 from processing.measured_region import MeasuredRegion
 from processing.sample_models import SampleModels
-from render.engine_lighting import PanoramaLitEngine
+from render.engines.interpolated import Predictor, RelitImage
+from render.engines.panorama_lit import PanoramaLitEngine
 from render.field_view import FieldView
 from render.light_prediction import PREDICTORS, environment_radiance, make_predictor
 from render.prediction_methods import LightPredictor
-from render.relighter import Predictor, RelitImage
 
 __all__ = ["INTERPOLATING", "PredictorRelightSettings", "PredictorRelighter"]
 

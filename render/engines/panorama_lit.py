@@ -4,8 +4,9 @@ The user's controls on a panorama (:class:`PanoramaControls`: yaw, exposure, a m
 are applied in one place, :meth:`PanoramaControls.adjusted`, to the panorama as the object sees
 it (its horizon, :class:`processing.panorama.VisibleEnvironments`); the result, an
 :class:`AdjustedPanorama`, is what the mode's choice and the guards judge and what every
-engine (:class:`render.relighter.Relighter`, :class:`render.model_relight.ModelRelighter`,
-:class:`render.predictor_relight.PredictorRelighter`) is lit by
+engine (:class:`render.engines.interpolated.Relighter`,
+:class:`render.engines.models.ModelRelighter`,
+:class:`render.engines.predicted.PredictorRelighter`) is lit by
 (:meth:`PanoramaLitEngine.take_lighting`): the mode says which lights it takes
 (``lighting_controls``), made from the adjusted panorama without adjusting it again.
 """

@@ -265,7 +265,7 @@ def relight_camera(
 ) -> NDArray[np.float32]:
     """Radiance (P, 3), float32, of every sample as measured camera ``camera`` sees it.
 
-    Cached per lighting by the :class:`render.relighter.Relighter`, these make a new view
+    Cached per lighting by the :class:`render.engines.interpolated.Relighter`, these make a new view
     under an unchanged lighting a blend of a few (P, 3) arrays.
     """
     slab = field.camera_slab(camera)

@@ -1,11 +1,11 @@
 """Which relighting a field gets: interpolation of its values, or its fitted per-sample models.
 
-Both engines, :class:`render.relighter.Relighter` (the paper's eq. 1-3 and our linear schemes)
-and :class:`render.model_relight.ModelRelighter`, take a lighting (from
+Both engines, :class:`render.engines.interpolated.Relighter` (the paper's eq. 1-3 and our
+linear schemes) and :class:`render.engines.models.ModelRelighter`, take a lighting (from
 :func:`processing.environment.light_environment`) and a view and return a
-:class:`render.relighter.RelitImage`. A mode (:class:`RelightMode`: their settings) opens its
-engine, names the lighting it takes and what predicts unmeasured lights and views, so no caller
-asks which kind of mode it holds.
+:class:`render.engines.interpolated.RelitImage`. A mode (:class:`RelightMode`: their
+settings) opens its engine, names the lighting it takes and what predicts unmeasured lights
+and views, so no caller asks which kind of mode it holds.
 :func:`most_accurate_mode` decides between them on the field's own measurements: the error of
 predicting every other measured light from the rest, for the chosen model and for barycentric
 interpolation over the lights, so the decision works on real captures, where no ground truth
@@ -30,9 +30,9 @@ from processing.environment import EnvironmentLighting, LightingControls
 from processing.panorama import Panorama
 from processing.sample_model_store import models_for_field
 from processing.sample_models import SampleModels, choose_model, interpolation_loo
+from render.engines.interpolated import Predictor, RelitImage, best_settings
+from render.engines.models import ModelRelightSettings
 from render.evaluation import HeldOutError, held_out_errors
-from render.model_relight import ModelRelightSettings
-from render.relighter import Predictor, RelitImage, best_settings
 
 __all__ = [
     "MOST_ACCURATE_MODELS",
@@ -215,7 +215,8 @@ def most_accurate_mode(
     ModeChoice
         ``MOST_ACCURATE_MODELS`` when the model chosen among the fitted ones predicts held-out
         lights better than barycentric interpolation does (:attr:`HeldOutComparison.models_win`:
-        in linear light, and not worse as displayed), else :func:`render.relighter.best_settings`.
+        in linear light, and not worse as displayed), else
+        :func:`render.engines.interpolated.best_settings`.
 
     Notes
     -----

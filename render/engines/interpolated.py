@@ -25,21 +25,21 @@ from processing.environment import EnvironmentLighting, LightingControls
 from processing.interpolation import InterpolationMethod, OutsidePolicy
 from processing.sample_models import SampleModels
 from processing.sampling import SamplerName
-from render.engine_lighting import PanoramaLitEngine
-from render.field_view import FieldView
-from render.light_weights import (
-    LightWeights,
-    pixel_light_weights,
-    projection_light_weights,
-    sampled_light_weights,
-)
-from render.relight import (
+from render.engines.panorama_lit import PanoramaLitEngine
+from render.engines.paper_sums import (
     ViewBlend,
     ViewField,
     blend_cameras,
     blend_field,
     relight_camera,
     relight_view,
+)
+from render.field_view import FieldView
+from render.light_weights import (
+    LightWeights,
+    pixel_light_weights,
+    projection_light_weights,
+    sampled_light_weights,
 )
 
 __all__ = [
@@ -65,7 +65,7 @@ class RelightSettings:
     """How to relight by interpolating the measured values; a relighting mode.
 
     The defaults are the paper's pipeline with our sampling improvements; a relighting mode in
-    the sense of :class:`render.relight_mode.RelightMode`.
+    the sense of :class:`render.engines.modes.RelightMode`.
 
     Attributes
     ----------
@@ -163,7 +163,7 @@ def best_settings(field_store: ReflectanceField) -> RelightSettings:
     Every panorama pixel as a light (eq. 2 over each normal's hemisphere) with barycentric
     interpolation over the measured lights and cameras: the lowest error of the linear schemes
     in the accuracy study (docs/relighting.md). Whether per-sample models do better is decided
-    per field by :func:`render.relight_mode.most_accurate_mode`.
+    per field by :func:`render.engines.modes.most_accurate_mode`.
     """
     del field_store  # every field supports it
     return RelightSettings(

@@ -34,7 +34,7 @@ the horizon, where a rig has no lights):
   behind the object plane (camera-frame z <= 0), whatever the model.
 
 Samples without any usable observation (no camera sees them lit) take the parameters of the
-nearest fitted sample and are reported as holes (:class:`render.relighter.RelitImage`).
+nearest fitted sample and are reported as holes (:class:`render.engines.interpolated.RelitImage`).
 """
 
 from __future__ import annotations
@@ -74,7 +74,8 @@ from processing.sample_models import (
     with_geometric_visibility,
 )
 from processing.sampling import SamplerName
-from render.engine_lighting import PanoramaLitEngine
+from render.engines.interpolated import Predictor, RelitImage
+from render.engines.panorama_lit import PanoramaLitEngine
 from render.field_view import FieldView
 from render.precomputed_lighting import (
     ALPHAS,
@@ -88,7 +89,6 @@ from render.precomputed_lighting import (
     sh_norms,
     shade_precomputed,
 )
-from render.relighter import Predictor, RelitImage
 
 __all__ = [
     "LIGHTING_MODES",
