@@ -60,7 +60,7 @@ from processing.interpolation import InterpolationMethod, interpolation_weights
 from processing.learned_rti_training import TrainingSettings
 from processing.sample_model_store import models_for_field
 from processing.sample_models import BASIS_MODELS, SampleModels, choose_model, fit_sample_models
-from render.engines.models import prepare_lighting, relight_models
+from render.engines.model_shading import prepare_lighting, relight_models
 from render.prediction_methods import (
     _TRAINED,
     LightPredictor,

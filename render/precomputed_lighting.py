@@ -1,9 +1,9 @@
 """Per-sample models relit at frame rate: what depends on the samples is computed once.
 
-The exact model relighting (:func:`render.engines.models.relight_models`) sums every light of a
-64 x 128 grid for every sample: about 2 s per lighting at 50,000 points. Here the sum is split
-the way real-time renderers split it, so that a new yaw or exposure costs a few small dot
-products per sample:
+The exact model relighting (:func:`render.engines.model_shading.relight_models`) sums every
+light of a 64 x 128 grid for every sample: about 2 s per lighting at 50,000 points. Here the
+sum is split the way real-time renderers split it, so that a new yaw or exposure costs a few
+small dot products per sample:
 
     L_p = rho_d / pi  sum_d cos_d V_d E_d  +  F0  sum_d S(w_d, v) cos_d V_d E_d
 
@@ -360,7 +360,7 @@ def sample_transfer(
     ----------
     normals : ndarray, shape (P, 3), the fitted normals
     source : ndarray, shape (P,), int64, whose marks each sample uses
-        (:func:`render.engines.models.fill_sources`)
+        (:func:`render.engines.model_shading.fill_sources`)
     lit : ndarray, shape (P, M), uint8, the shadow marks at ``mark_directions``
     mark_directions : ndarray, shape (M, 3), unit vectors (rig frame)
     reaches : ndarray, shape (3,), optional; light from w reaches the samples only where

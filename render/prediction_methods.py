@@ -44,7 +44,7 @@ from processing.learned_rti import LearnedRTI
 from processing.learned_rti_training import TrainingSettings, train_learned_rti
 from processing.sample_models import SampleModels, choose_model, evaluate_basis
 from processing.sample_models.bases import fit_basis
-from render.engines.models import prepare_lighting, relight_models
+from render.engines.model_shading import prepare_lighting, relight_models
 from render.rti_fits import fit_basis_8bit, rbf_weights
 
 __all__ = [

@@ -4,7 +4,8 @@
   controls, applied once);
 - :mod:`render.engines.interpolated`: the paper's engine, interpolating the measured values
   (its sums and camera blending in :mod:`render.engines.paper_sums`);
-- :mod:`render.engines.models`: through the fitted per-sample models;
+- :mod:`render.engines.models`: through the fitted per-sample models (their shading under a
+  set of lights in :mod:`render.engines.model_shading`);
 - :mod:`render.engines.predicted`: through any light predictor (fields of pixels);
 - :mod:`render.engines.modes`: which of them a field gets, and opening it.
 

@@ -22,12 +22,8 @@ from processing.sample_models import (
     fit_sample_models,
 )
 from render.engines.interpolated import Relighter, RelightSettings
-from render.engines.models import (
-    ModelRelighter,
-    ModelRelightSettings,
-    prepare_lighting,
-    relight_models,
-)
+from render.engines.model_shading import prepare_lighting, relight_models
+from render.engines.models import ModelRelighter, ModelRelightSettings
 from sim.ground_truth import render_environment, shade_environment
 from sim.scenes import build_scene
 from tests.sim_fields import peak_seen, simulated_field
