@@ -58,6 +58,7 @@ from processing.learned_rti import (
 )
 from processing.network_training import (
     Device,
+    adam,
     check_settings,
     idle_cores,
     numpy_layers,
@@ -362,7 +363,7 @@ def _train_phase(
     else:
         coder = torch.nn.Parameter(coder.detach().to(data.device))
         parameters = [coder, *decoder.parameters()]
-    optimiser = torch.optim.Adam(parameters, lr=settings.rate)
+    optimiser = adam([{"params": parameters, "lr": settings.rate}])
     planned = max(1, epochs * clock.steps_per_epoch)
     first_step, first_second = clock.step, clock.seconds()
     seconds = max(clock.second_limit - first_second, 1e-9)

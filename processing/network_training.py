@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import math
 import os
-from typing import TYPE_CHECKING, Literal, Protocol
+import sys
+import tempfile
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +29,7 @@ if TYPE_CHECKING:  # imported when training: relighting never needs it
 
 __all__ = [
     "Device",
+    "adam",
     "check_settings",
     "idle_cores",
     "numpy_layers",
@@ -154,6 +157,26 @@ def principal_codes(encoded: NDArray[np.float32], k: int, seed: int) -> NDArray[
     spread = float(np.std(scores[:, 0])) if len(rows) > 1 else 0.0
     scores *= 0.5 / spread if spread > 0 else 1.0
     return scores.astype(np.float32)
+
+
+def adam(parameters: Any) -> torch.optim.Adam:
+    """PyTorch's Adam over ``parameters`` (tensors, or groups of them with their options).
+
+    A first optimiser imports ``torch._dynamo``, whose import makes PyTorch's compiler cache
+    folder in the temp folder (``torchinductor_<user>``) and leaves it there: every training
+    left one behind, although nothing here compiles. Unless the user chose that folder
+    (``TORCHINDUCTOR_CACHE_DIR``), the import makes it in a temporary folder removed at once.
+    """
+    import torch
+
+    if "torch._dynamo" not in sys.modules and "TORCHINDUCTOR_CACHE_DIR" not in os.environ:
+        with tempfile.TemporaryDirectory(prefix="rig-torch-") as scratch:
+            os.environ["TORCHINDUCTOR_CACHE_DIR"] = scratch
+            try:
+                import torch._dynamo
+            finally:
+                os.environ.pop("TORCHINDUCTOR_CACHE_DIR", None)
+    return torch.optim.Adam(parameters)
 
 
 def torch_mlp(sizes: list[int]) -> torch.nn.Sequential:

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from core.errors import InputError
 from processing.network_training import (
     Device,
+    adam,
     check_settings,
     idle_cores,
     numpy_layers,
@@ -345,7 +346,7 @@ def _train(
     count = values.shape[0]
     targets = torch.from_numpy(values).to(device)  # 8-bit kept: a quarter of float32's memory
     xy = torch.from_numpy(np.ascontiguousarray(lights[:, :2])).to(device)
-    optimiser = torch.optim.Adam(groups)
+    optimiser = adam(groups)
     trainable = [p for group in groups for p in group["params"]]
     initial = [group["lr"] for group in optimiser.param_groups]
     generator = torch.Generator().manual_seed(settings.seed)

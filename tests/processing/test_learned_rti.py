@@ -1,6 +1,10 @@
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,6 +14,8 @@ from core.errors import InputError
 from processing.learned_rti import CODE_SIZE, LearnedRTI, light_features
 from processing.learned_rti_training import TrainingSettings, _decoded, train_learned_rti
 from processing.network_training import numpy_layers, torch_mlp, validation_lights
+
+ROOT = Path(__file__).parents[2]
 
 torch = pytest.importorskip("torch", reason="the learned extra (PyTorch) is not installed")
 
@@ -229,3 +235,17 @@ def test_bad_inputs_are_named() -> None:
     if not torch.cuda.is_available():
         with pytest.raises(InputError, match="PyTorch sees no CUDA GPU"):
             train_learned_rti(_lambertian(lights, 5), lights, TrainingSettings(device="cuda"))
+
+
+def test_an_optimiser_leaves_nothing_in_the_temp_folder(tmp_path: Path) -> None:
+    # torch.optim imports torch._dynamo, which makes its compiler cache in the temp folder: a
+    # training (and a signal test whose signal came late) found torchinductor_<user> left there.
+    # A process of its own: this one may have imported torch._dynamo already.
+    code = (
+        "import torch\n"
+        "from processing.network_training import adam\n"
+        "adam([torch.zeros(2, requires_grad=True)]).step()\n"
+    )
+    subprocess.run([sys.executable, "-c", code], cwd=ROOT, check=True,
+                   env={**os.environ, "TMPDIR": str(tmp_path)})  # fmt: skip
+    assert sorted(path.name for path in tmp_path.iterdir()) == []
