@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import faulthandler
 import os
 import select
 import signal
@@ -113,6 +114,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         _silence_stdout()
         return 128 + signal.SIGPIPE
+    # `kill -USR1 PID` prints every thread's stack on stderr: what a command that seems stuck
+    # is doing (the signal tests ask for it before giving up on a process).
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     with _unwind_on_sigterm() as received:
         try:
             check_file_arguments(args)  # a FIFO or a device would block or never end

@@ -51,6 +51,15 @@ def _until(condition: Callable[[], object], process: subprocess.Popen[bytes], wh
         time.sleep(0.2)
 
 
+def _stacks(process: subprocess.Popen[bytes], logs: Path) -> str:
+    """Every thread's stack of a stuck ``rig`` (SIGUSR1, see app.cli.main), then kill it."""
+    process.send_signal(signal.SIGUSR1)
+    time.sleep(2.0)  # a bound on nothing: the stacks are read, whatever was written by then
+    process.kill()
+    process.wait()
+    return (logs / "stderr.txt").read_text(errors="replace")[-6000:]
+
+
 def _stopped_cleanly(
     process: subprocess.Popen[bytes], number: int, scratch: Path, logs: Path
 ) -> str:
@@ -59,8 +68,10 @@ def _stopped_cleanly(
     try:
         process.wait(timeout=PATIENCE_S)
     except subprocess.TimeoutExpired:
-        process.kill()
-        raise AssertionError(f"rig did not stop within {PATIENCE_S:.0f} s of the signal") from None
+        raise AssertionError(
+            f"rig did not stop within {PATIENCE_S:.0f} s of the signal; its threads:\n"
+            + _stacks(process, logs)
+        ) from None
     stderr = (logs / "stderr.txt").read_text(errors="replace")
     assert "Traceback" not in stderr, stderr[-3000:]
     left = sorted(path.name for path in scratch.iterdir())
