@@ -17,6 +17,7 @@ and queries off it are outside.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -84,6 +85,9 @@ class MeasuredRegion:
     def build(points: FloatArray) -> MeasuredRegion:
         """Triangulate the region of measured directions.
 
+        The same directions give the same region, kept (read-only) for the next call: the
+        relighting asks for the region of one light set once per predicted light.
+
         Parameters
         ----------
         points : ndarray, shape (N, 3), float64
@@ -95,6 +99,11 @@ class MeasuredRegion:
             Triangulated, or for sets on one great circle (or of one or two directions) its
             arcs and points only.
         """
+        data = np.ascontiguousarray(points, dtype=np.float64)
+        return _built(data.tobytes(), len(data))
+
+    @staticmethod
+    def _triangulate(points: FloatArray) -> MeasuredRegion:
         count = len(points)
         if count >= 3:
             s = np.linalg.svd(points, compute_uv=False)
@@ -398,3 +407,12 @@ def _clamp_kernel(
         weights[row, 1] = 1.0 - wa
         weights[row, 2] = 0.0
         gap[row] = math.sqrt((x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2)
+
+
+@functools.lru_cache(maxsize=64)
+def _built(data: bytes, count: int) -> MeasuredRegion:
+    """:meth:`MeasuredRegion.build` of the directions held in ``data``, its arrays read-only."""
+    region = MeasuredRegion._triangulate(np.frombuffer(data, dtype=np.float64).reshape(count, 3))
+    for value in vars(region).values():
+        value.setflags(write=False)
+    return region

@@ -369,3 +369,17 @@ def test_bad_input_is_refused(
     method = str(kwargs.pop("method", "paper"))
     with pytest.raises(InputError, match=message):
         interpolation_weights(measured, queries, method, **kwargs)  # type: ignore[arg-type]
+
+
+def test_a_light_sets_region_is_built_once_and_cannot_change() -> None:
+    # The relighting asks for the region of one light set once per predicted light.
+    from processing.measured_region import MeasuredRegion
+
+    points = hemisphere_layout(30, "fibonacci")
+    region = MeasuredRegion.build(points)
+    assert MeasuredRegion.build(points.copy()) is region
+    points[0] = -points[0]  # the caller's array is the caller's: the region kept its own
+    assert not np.array_equal(region.vertices[0], points[0])
+    assert MeasuredRegion.build(points) is not region
+    with pytest.raises(ValueError, match="read-only"):
+        region.triangles[0, 0] = 1
