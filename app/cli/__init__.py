@@ -116,7 +116,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 128 + signal.SIGPIPE
     # `kill -USR1 PID` prints every thread's stack on stderr: what a command that seems stuck
     # is doing (the signal tests ask for it before giving up on a process).
-    faulthandler.register(signal.SIGUSR1, all_threads=True)
+    if sys.__stderr__ is not None:  # a process with no stderr (embedded) has no stacks to print
+        faulthandler.register(signal.SIGUSR1, file=sys.__stderr__, all_threads=True)
     with _unwind_on_sigterm() as received:
         try:
             check_file_arguments(args)  # a FIFO or a device would block or never end
