@@ -1,27 +1,36 @@
 """Which rung relights a field of pixels under a panorama: chosen by held-out error under it.
 
-Under an environment a method is used as a weighted sum of its predictions, so the error that
-matters is not one light's but the panorama's sum's: errors of neighbouring lights partly
-cancel, and the light-stage sum, whose single-light prediction is the nearest measured image,
-does much better under a broad sky than under a sun. The choice therefore looks like the use:
+The light-stage sum relights the panorama's smooth light inside the measured region: a
+quadrature of the sphere whose errors cancel between neighbouring cells, the best rung or within
+a few tenths of a point of it under broad skies on path-traced scenes (docs/evaluation.md). What
+it gathers badly, light concentrated within a cell (a sun, a lamp) and light outside the region
+the measured lights surround, is split off (:func:`processing.light_split.split_light`) and
+predicted at its own directions by the rung chosen for it here: when that light is under
+:data:`SHARP_SHARE` of the panorama's, the sum relights everything and nothing is chosen.
+
+Under an environment a rung is used as a weighted sum of its predictions, so the error that
+matters is not one light's but the panorama's sum's. The choice therefore looks like the use:
 
 1. the field's lights are split (every other light, and the
-   lowest lights held out when part of the panorama's light lies below the measured lights, so
+   lowest lights held out when part of the sharp light lies below the measured lights, so
    extrapolation is tested where the use extrapolates);
-2. the panorama (as the object sees it: below the horizon blocked when the capture says so)
+2. the sharp light (as the object sees it: below the horizon blocked when the capture says so)
    is gathered into the spherical Voronoi cells of the held-out lights, E_j;
 3. the truth is the sum of the held-out images weighted by E_j, and each candidate predicts
    every held-out light from the fit lights alone and is weighted the same way; its error is
    the relative RMSE in linear light over the object's pixels, its excess over the error of
    the same sum at the measured lights scaled to the panorama's gaps as
    :class:`render.rung_choice.UseGaps` scales it, the splits weighted by the share
-   of the panorama's light they stand for (the lowest lights: the share outside the measured
+   of the light they stand for (the lowest lights: the share outside the measured
    lights; every other light: the rest).
 
-The winner is refitted on every light and relights through its engine: the light-stage sum is
-``RelightSettings(scheme="projection")`` (each measured image weighted by the light of its
-Voronoi cell, Debevec et al. 2000), barycentric interpolation the ``pixels`` scheme, the fitted
-model alone :data:`render.engines.modes.MOST_ACCURATE_MODELS`, any other predictor
+The winner is refitted on every light and relights the sharp light through
+:class:`render.engines.predicted.PredictorRelightSettings` with ``split``, the sum the rest;
+when the sum itself wins (its nearest measured light predicts the held-out ones best), it
+relights everything. ``--method NAME`` relights the whole panorama through one rung
+(:func:`environment_mode`): the light-stage sum is ``RelightSettings(scheme="projection")``
+(Debevec et al. 2000), barycentric interpolation the ``pixels`` scheme, the fitted model alone
+:data:`render.engines.modes.MOST_ACCURATE_MODELS`, any other predictor
 :class:`render.engines.predicted.PredictorRelightSettings`.
 """
 
@@ -41,6 +50,7 @@ from core.field_store import ReflectanceField
 from core.light_set import grid_lights
 from core.progress import progress_bar
 from processing.image_quality import relative_rmse
+from processing.light_split import split_light
 from processing.lights import disassemble_lights
 from processing.measured_region import MeasuredRegion
 from processing.panorama import Panorama
@@ -55,6 +65,7 @@ from render.rung_choice import GAP_EXPONENT
 __all__ = [
     "ENVIRONMENT_CANDIDATES",
     "LIGHT_STAGE",
+    "SHARP_SHARE",
     "SLOW_CANDIDATES",
     "CandidateScore",
     "EnvironmentChoice",
@@ -81,6 +92,8 @@ SLOW_CANDIDATES = ("learned+residual",)
 EXTRAPOLATION_SHARE = 0.02
 #: Rows of the blocks the panorama's light outside the measured region is read from.
 OUTSIDE_GRID = 32
+#: Share of the light split off as sharp below which the light-stage sum relights it all.
+SHARP_SHARE = 0.01
 
 
 @dataclass(frozen=True)
@@ -103,12 +116,17 @@ class CandidateScore:
 
 @dataclass(frozen=True)
 class EnvironmentChoice:
-    """The chosen mode, every candidate's score and why."""
+    """The chosen mode, every candidate's score and why.
+
+    ``sharp_share``: the share of the panorama's light the chosen rung predicts (the rest is
+    the light-stage sum's); ``scores`` are errors under that light alone.
+    """
 
     mode: RelightMode
     scores: tuple[CandidateScore, ...]
     splits: tuple[str, ...]
     reason: str
+    sharp_share: float = 1.0
 
 
 def environment_mode(name: str) -> RelightMode:
@@ -226,6 +244,14 @@ def choose_environment_mode(
     if field.image_shape is None:
         raise InputError(f"{field.path}: the environment choice is made for fields of pixels")
     names = list(candidates or (*ENVIRONMENT_CANDIDATES, *(() if fast else SLOW_CANDIDATES)))
+    parts = split_light(panorama.rgb, field.light_directions)
+    if parts.sharp_share < SHARP_SHARE:
+        reason = (
+            f"{LIGHT_STAGE}: the panorama's light is smooth over the measured lights "
+            f"({parts.sharp_share:.1%} of it concentrated within a light's cell or outside them)"
+        )
+        return EnvironmentChoice(environment_mode(LIGHT_STAGE), (), (), reason, parts.sharp_share)
+    panorama = replace(panorama, rgb=parts.sharp)
     splits = held_out_splits(field, panorama)
     errors: dict[str, list[float]] = {name: [] for name in names}
     seconds = dict.fromkeys(names, 0.0)
@@ -270,10 +296,25 @@ def choose_environment_mode(
         f", the light-stage sum {stage.error:.1%}" if stage is not None and best != stage else ""
     )
     how = " and ".join(f"{name}, {weight:.0%}" for name, _, _, weight in splits)
-    reason = (
-        f"{best.name} predicts held-out lights ({how}) summed under this panorama with "
-        f"{best.error:.1%} error{against} ({sum(seconds.values()):.0f} s to choose among "
-        f"{len(names)})"
+    share = (
+        f"{parts.sharp_share:.0%} of the light (concentrated within a light's cell or outside "
+        "the measured lights)"
     )
-    mode = environment_mode(best.name)
-    return EnvironmentChoice(mode, scores, tuple(name for name, _, _, _ in splits), reason)
+    held = (
+        f"held-out lights ({how}) summed under that light with {best.error:.1%} error{against} "
+        f"({sum(seconds.values()):.0f} s to choose among {len(names)})"
+    )
+    if best.name == LIGHT_STAGE:
+        mode = environment_mode(LIGHT_STAGE)
+        reason = (
+            f"{LIGHT_STAGE} for all the light: its nearest measured light predicts the sharp "
+            f"{share} best, {held}"
+        )
+    else:
+        mode = PredictorRelightSettings(method=best.name, split=True)
+        reason = (
+            f"{best.name} relights the sharp {share}, {LIGHT_STAGE} the rest; it predicts {held}"
+        )
+    return EnvironmentChoice(
+        mode, scores, tuple(name for name, _, _, _ in splits), reason, parts.sharp_share
+    )

@@ -15,6 +15,12 @@ centroid), where the light-stage sum moves it to the nearest measured light; a p
 carries the residual at the measured lights (``<model>+residual``, ``adaptive``) reproduces
 every measured image, so what it adds is only where the lights were not measured.
 
+With ``split`` the predictor relights only the light the light-stage sum gathers badly (light
+concentrated within a measured light's cell, and light outside the measured region,
+:func:`processing.light_split.split_light`), and the sum relights the rest: under a broad sky
+this is the sum itself, whose errors cancel between neighbouring cells; under a sun, the sun is
+predicted at its direction.
+
 Fields of pixels (one fixed view, RTI captures) only: a field of points relights through its
 models (:mod:`render.engines.models`) or the linear schemes, which blend cameras for new views.
 """
@@ -30,8 +36,10 @@ from numpy.typing import NDArray
 from core.camera_model import PinholeCamera
 from core.errors import InputError
 from core.field_store import ReflectanceField
-from core.light_set import LightSet
+from core.light_set import LightSet, grid_lights
 from processing.environment import EnvironmentLighting, LightingControls
+from processing.light_split import outside_pixels, split_light
+from processing.lights import disassemble_lights
 from processing.measured_region import MeasuredRegion
 from processing.sample_models import SampleModels
 from render.engines.interpolated import Predictor, RelitImage
@@ -55,10 +63,13 @@ class PredictorRelightSettings:
     method : str, a :data:`render.light_prediction.PREDICTORS` entry
     grid_height : int, the panorama summed into ``grid_height`` x 2 ``grid_height`` blocks
         (the blocks below a blocked horizon carry no light and are skipped)
+    split : bool, predict only the sharp light and give the smooth light to the light-stage
+        sum (the module)
     """
 
     method: str
     grid_height: int = 32
+    split: bool = False
 
     def __post_init__(self) -> None:
         if self.method not in PREDICTORS:
@@ -103,7 +114,10 @@ class PredictorRelightSettings:
     def describe(self, models: SampleModels | None = None) -> str:
         """A short name for reports."""
         del models
-        return f"{self.method}, grid {self.grid_height}x{2 * self.grid_height}"
+        grid = f"grid {self.grid_height}x{2 * self.grid_height}"
+        if self.split:
+            return f"{self.method} for the sharp light ({grid}), the light-stage sum for the rest"
+        return f"{self.method}, {grid}"
 
     def open(
         self, field_store: ReflectanceField, models: SampleModels | None = None
@@ -138,6 +152,9 @@ class PredictorRelighter(PanoramaLitEngine):
         self._radiance: NDArray[np.float32] | None = None
         self._view: FieldView | None = None
         self._outside = 0.0
+        # The split: the smooth light's weight per measured light (T, 3), the region's mask.
+        self._sum_weights: NDArray[np.float64] | None = None
+        self._outside_pixels: NDArray[np.bool_] | None = None
 
     @property
     def environment(self) -> EnvironmentLighting | None:
@@ -152,6 +169,15 @@ class PredictorRelighter(PanoramaLitEngine):
         region = MeasuredRegion.build(self.field.light_directions)
         outside = region.outside(lights.directions)
         self._outside = float(energy[outside].sum() / total) if total > 0 else 0.0
+        self._sum_weights = None
+        if self.settings.split:
+            rgb = lighting.panorama.rgb
+            if self._outside_pixels is None or self._outside_pixels.shape != rgb.shape[:2]:
+                self._outside_pixels = outside_pixels(self.field.light_directions, rgb.shape[0])
+            parts = split_light(rgb, self.field.light_directions, self._outside_pixels)
+            smooth = disassemble_lights(parts.smooth, self.field.light_directions)
+            self._sum_weights = smooth.rgb
+            lights = grid_lights(parts.sharp, self.settings.grid_height).nonempty()
         self._environment, self._lights, self._radiance = lighting, lights, None
 
     def set_view(self, camera: PinholeCamera) -> float:
@@ -172,7 +198,15 @@ class PredictorRelighter(PanoramaLitEngine):
         view = self._view or FieldView(self.field, self.field.cameras[0])
         start = time.perf_counter()
         if self._radiance is None:
-            radiance = environment_radiance(self.predictor, 0, self._lights, self.field.shape[2])
+            radiance = np.zeros((self.field.shape[2], 3))
+            if self._lights.k:
+                radiance = environment_radiance(
+                    self.predictor, 0, self._lights, self.field.shape[2]
+                ).astype(np.float64)
+            if self._sum_weights is not None:
+                radiance += np.einsum(
+                    "tc,tpc->pc", self._sum_weights, self.field.camera_slab(0), dtype=np.float64
+                )
             # A mask's other pixels are no samples: black, as every engine leaves them.
             self._radiance = np.where(view.needed[:, None], radiance, 0.0).astype(np.float32)
         return RelitImage(

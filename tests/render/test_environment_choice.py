@@ -136,3 +136,40 @@ def test_the_light_stage_corrected_by_the_model_keeps_every_measured_image(
     np.testing.assert_allclose(
         predictor.predict(0, plane.light_directions), measured, rtol=1e-4, atol=1e-6
     )
+
+
+def test_light_smooth_over_the_measured_lights_is_the_light_stage_sum_alone(
+    plane: ReflectanceField,
+) -> None:
+    from core.directions import panorama_directions
+
+    # Brightest overhead and falling to nothing at the horizon: no cell holds uneven light.
+    up = np.clip(panorama_directions(32, 64)[..., 2], 0.0, None) ** 4
+    sky = panorama_from_array(np.repeat(up[..., None], 3, axis=2).astype(np.float32))
+    choice = choose_environment_mode(plane, sky, fast=True)
+    assert choice.mode == environment_mode(LIGHT_STAGE) and choice.scores == ()
+    assert choice.sharp_share < 0.01 and "smooth" in choice.reason
+    # The split engine gives that light to the sum: the sum's image but for the little (under
+    # 1 %) it predicts.
+    images = []
+    for mode in (environment_mode(LIGHT_STAGE), PredictorRelightSettings("adaptive", split=True)):
+        engine = mode.open(plane)
+        engine.set_lighting(sky)
+        engine.set_view(plane.cameras[0])
+        images.append(engine.render().rgb)
+    np.testing.assert_allclose(images[1], images[0], rtol=0.01, atol=1e-7)
+
+
+def test_a_sun_is_predicted_and_its_sky_is_summed(plane: ReflectanceField) -> None:
+    rgb = np.full((32, 64, 3), 0.05, dtype=np.float32)
+    rgb[20:] = 0.0  # below the horizon, blocked anyway
+    rgb[9, 21] = 4000.0  # a sun some 30 degrees up, between the measured lights
+    sun = panorama_from_array(rgb, source="sun")
+    choice = choose_environment_mode(plane, sun, candidates=[LIGHT_STAGE, "lambert+ggx+residual"])
+    assert choice.sharp_share > 0.5 and {s.name for s in choice.scores} == {
+        LIGHT_STAGE,
+        "lambert+ggx+residual",
+    }
+    # On a Lambertian plane the model predicts a light between the measured ones exactly.
+    assert choice.mode == PredictorRelightSettings("lambert+ggx+residual", split=True)
+    assert "the rest" in choice.reason and f"{choice.sharp_share:.0%}" in choice.reason
