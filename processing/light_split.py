@@ -27,10 +27,10 @@ from numpy.typing import NDArray
 
 from core.directions import panorama_directions, panorama_row_solid_angles
 from core.errors import InputError
-from processing.lights import nearest_sample_labels
+from processing.lights import gather_cells, nearest_sample_labels
 from processing.measured_region import MeasuredRegion
 
-__all__ = ["CONTRAST", "LightSplit", "outside_pixels", "split_light"]
+__all__ = ["CONTRAST", "LightSplit", "LightSplitter", "outside_pixels", "split_light"]
 
 #: A pixel brighter than this many times its cell's mean radiance holds concentrated light:
 #: above it a cell's light no longer averages out over the cell. 2 and 4 were measured on the
@@ -48,11 +48,14 @@ class LightSplit:
     ----------
     smooth : ndarray, shape (H, 2H, 3), float32, linear radiance for the sum
     sharp : ndarray, shape (H, 2H, 3), float32, linear radiance to predict
+    smooth_cells : ndarray, shape (N, 3), float64, the smooth light gathered into each
+        measured light's Voronoi cell (radiance x sr): the light-stage sum's weights
     sharp_share : float, the sharp part's share of the light (solid-angle weighted), in [0, 1]
     """
 
     smooth: NDArray[np.float32]
     sharp: NDArray[np.float32]
+    smooth_cells: NDArray[np.float64]
     sharp_share: float
 
 
@@ -73,10 +76,59 @@ def outside_pixels(directions: NDArray[np.floating], height: int) -> NDArray[np.
     return region.outside(towards).reshape(height, 2 * height)
 
 
+class LightSplitter:
+    """Splits H x 2H panoramas over one set of measured lights (see the module).
+
+    The cells and the region are found once: a relighting that turns a panorama splits it
+    anew for every yaw.
+
+    Parameters
+    ----------
+    directions : ndarray, shape (N, 3), float64, the measured lights (unit vectors, the
+        panorama's frame)
+    height : int, the panoramas' rows
+    contrast : float, > 1, keyword-only; the brightness over a cell's mean above which light
+        counts as concentrated
+    """
+
+    def __init__(
+        self, directions: NDArray[np.floating], height: int, *, contrast: float = CONTRAST
+    ) -> None:
+        if not contrast > 1.0:
+            raise InputError(f"the contrast of concentrated light must be above 1, got {contrast}")
+        self.shape = (height, 2 * height)
+        self.contrast = contrast
+        self.count = len(np.asarray(directions))
+        self.labels = nearest_sample_labels(directions, height, 2 * height)
+        self.outside = outside_pixels(directions, height)
+        self.weight = np.repeat(panorama_row_solid_angles(height, 2 * height), 2 * height)
+
+    def split(self, rgb: NDArray[np.floating]) -> LightSplit:
+        """Split ``rgb`` (H, 2H, 3), linear radiance, non-negative."""
+        image = np.asarray(rgb, dtype=np.float32)
+        if image.shape != (*self.shape, 3):
+            raise InputError(f"the panorama is {image.shape}, the splitter's {(*self.shape, 3)}")
+        # A cell's mean over all of it: light filling only part of a cell (a cell at a blocked
+        # horizon, at the edge of a bright window) is uneven within it, which the sum misplaces.
+        # Per channel: a coloured lamp is concentrated in its own channel.
+        gathered, area = gather_cells(image, self.labels, self.count)
+        ceiling = (self.contrast * gathered / np.maximum(area, 1e-300)[:, None]).astype(np.float32)
+        smooth = np.minimum(image, ceiling[self.labels])
+        smooth[self.outside] = 0.0
+        sharp = image - smooth
+        total = float(self.weight @ image.reshape(-1, 3).sum(axis=1, dtype=np.float64))
+        kept = float(self.weight @ sharp.reshape(-1, 3).sum(axis=1, dtype=np.float64))
+        return LightSplit(
+            smooth,
+            sharp,
+            gather_cells(smooth, self.labels, self.count)[0],
+            min(max(kept / total if total > 0 else 0.0, 0.0), 1.0),
+        )
+
+
 def split_light(
     rgb: NDArray[np.floating],
     directions: NDArray[np.floating],
-    outside: NDArray[np.bool_] | None = None,
     *,
     contrast: float = CONTRAST,
 ) -> LightSplit:
@@ -87,8 +139,6 @@ def split_light(
     rgb : ndarray, shape (H, 2H, 3), linear radiance, non-negative
     directions : ndarray, shape (N, 3), float64, the measured lights (unit vectors, the
         panorama's frame)
-    outside : ndarray, shape (H, 2H), bool, optional; :func:`outside_pixels` of the lights (a
-        caller relighting one field under many panoramas computes it once)
     contrast : float, > 1, keyword-only; the brightness over a cell's mean above which light
         counts as concentrated
 
@@ -96,32 +146,7 @@ def split_light(
     -------
     LightSplit
     """
-    if not contrast > 1.0:
-        raise InputError(f"the contrast of concentrated light must be above 1, got {contrast}")
-    image = np.asarray(rgb, dtype=np.float64)
-    height, width = image.shape[:2]
-    if image.ndim != 3 or image.shape[2] != 3:
+    image = np.asarray(rgb)
+    if image.ndim != 3 or image.shape[2] != 3 or image.shape[1] != 2 * image.shape[0]:
         raise InputError(f"a panorama must have shape (H, 2H, 3), got {image.shape}")
-    if outside is None:
-        outside = outside_pixels(directions, height)
-    elif outside.shape != (height, width):
-        raise InputError(f"the outside mask is {outside.shape}, the panorama {(height, width)}")
-    labels = nearest_sample_labels(directions, height, width).ravel()
-    # A cell's mean over all of it: light filling only part of a cell (a cell at a blocked
-    # horizon, or at the edge of a bright window) is uneven within it, which the sum misplaces.
-    omega = np.broadcast_to(panorama_row_solid_angles(height, width)[:, None], (height, width))
-    weight = omega.ravel()
-    count = len(np.asarray(directions))
-    area = np.maximum(np.bincount(labels, weight, count), 1e-300)
-    pixels = image.reshape(-1, 3)
-    # Per channel: a coloured lamp is concentrated in its own channel.
-    mean = np.stack([np.bincount(labels, weight * pixels[:, c], count) for c in range(3)], axis=1)
-    smooth = np.minimum(pixels, contrast * (mean / area[:, None])[labels])
-    smooth[outside.ravel()] = 0.0
-    smooth = smooth.reshape(image.shape)
-    sharp = image - smooth
-    total = float(np.sum(image * omega[:, :, None]))
-    share = float(np.sum(sharp * omega[:, :, None]) / total) if total > 0 else 0.0
-    return LightSplit(
-        smooth.astype(np.float32), sharp.astype(np.float32), min(max(share, 0.0), 1.0)
-    )
+    return LightSplitter(directions, image.shape[0], contrast=contrast).split(image)

@@ -29,7 +29,7 @@ from core.directions import (
 from core.errors import InputError
 from core.light_set import LightSet
 
-__all__ = ["disassemble_lights", "nearest_sample_labels"]
+__all__ = ["disassemble_lights", "gather_cells", "nearest_sample_labels"]
 
 BLOCK = 8  # pixels per block side for the pruned nearest-sample search
 
@@ -91,11 +91,32 @@ def disassemble_lights(rgb: NDArray[np.floating], directions: NDArray[np.floatin
     height, width = image.shape[:2]
     samples = _check_directions(directions)
     labels = nearest_sample_labels(samples, height, width)
-    omega = panorama_row_solid_angles(height, width)
-    gathered = np.zeros((samples.shape[0], 3), dtype=np.float64)
-    area = np.zeros(samples.shape[0], dtype=np.float64)
-    _gather(np.ascontiguousarray(image, dtype=np.float32), labels, omega, gathered, area)
+    gathered, area = gather_cells(image, labels, samples.shape[0])
     return LightSet(directions=samples, rgb=gathered, solid_angle_sr=area, labels=labels)
+
+
+def gather_cells(
+    rgb: NDArray[np.floating], labels: NDArray[np.int32], count: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A panorama's light summed per cell: radiance x solid angle, and each cell's solid angle.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (H, 2H, 3), linear radiance
+    labels : ndarray, shape (H, 2H), int32, each pixel's cell (:func:`nearest_sample_labels`)
+    count : int, the cells
+
+    Returns
+    -------
+    gathered : ndarray, shape (count, 3), float64, radiance x sr
+    area : ndarray, shape (count,), float64, sr
+    """
+    height, width = labels.shape
+    gathered = np.zeros((count, 3), dtype=np.float64)
+    area = np.zeros(count, dtype=np.float64)
+    omega = panorama_row_solid_angles(height, width)
+    _gather(np.ascontiguousarray(rgb, dtype=np.float32), labels, omega, gathered, area)
+    return gathered, area
 
 
 @numba.njit(cache=True, parallel=True)

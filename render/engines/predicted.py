@@ -38,8 +38,7 @@ from core.errors import InputError
 from core.field_store import ReflectanceField
 from core.light_set import LightSet, grid_lights
 from processing.environment import EnvironmentLighting, LightingControls
-from processing.light_split import outside_pixels, split_light
-from processing.lights import disassemble_lights
+from processing.light_split import LightSplitter
 from processing.measured_region import MeasuredRegion
 from processing.sample_models import SampleModels
 from render.engines.interpolated import Predictor, RelitImage
@@ -152,9 +151,9 @@ class PredictorRelighter(PanoramaLitEngine):
         self._radiance: NDArray[np.float32] | None = None
         self._view: FieldView | None = None
         self._outside = 0.0
-        # The split: the smooth light's weight per measured light (T, 3), the region's mask.
+        # The split: the smooth light's weight per measured light (T, 3), and its splitter.
         self._sum_weights: NDArray[np.float64] | None = None
-        self._outside_pixels: NDArray[np.bool_] | None = None
+        self._splitter: LightSplitter | None = None
 
     @property
     def environment(self) -> EnvironmentLighting | None:
@@ -172,11 +171,10 @@ class PredictorRelighter(PanoramaLitEngine):
         self._sum_weights = None
         if self.settings.split:
             rgb = lighting.panorama.rgb
-            if self._outside_pixels is None or self._outside_pixels.shape != rgb.shape[:2]:
-                self._outside_pixels = outside_pixels(self.field.light_directions, rgb.shape[0])
-            parts = split_light(rgb, self.field.light_directions, self._outside_pixels)
-            smooth = disassemble_lights(parts.smooth, self.field.light_directions)
-            self._sum_weights = smooth.rgb
+            if self._splitter is None or self._splitter.shape != rgb.shape[:2]:
+                self._splitter = LightSplitter(self.field.light_directions, rgb.shape[0])
+            parts = self._splitter.split(rgb)
+            self._sum_weights = parts.smooth_cells
             lights = grid_lights(parts.sharp, self.settings.grid_height).nonempty()
         self._environment, self._lights, self._radiance = lighting, lights, None
 
