@@ -64,8 +64,10 @@ def add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--method", choices=("auto", "light-stage", *PREDICTORS), default="auto",
                    help="the method that predicts unmeasured lights (default auto: the best on "
                    "held-out lights of the field, chosen among every rung; --env on an RTI "
-                   "capture: under this panorama, light-stage being the classic sum of the "
-                   "images weighted by the light of their cells)")  # fmt: skip
+                   "capture: the light-stage sum (the images weighted by the light of their "
+                   "cells) for the smooth light, the rung best under the sharp light (a sun, "
+                   "lamps, light below the lowest lights) for that; a NAME: the whole panorama "
+                   "through that method)")  # fmt: skip
     p.add_argument("--fast", action="store_true", help="auto: choose among the quick rungs "
                    "only (no network to train)")  # fmt: skip
     p.add_argument("--camera", type=whole, help="--lights on a field of points: the captured "
