@@ -54,15 +54,19 @@ def _partials(folder: Path) -> list[str]:
 
 
 def _signalled_while_building(
-    dataset: Path, output: Path, number: int, logs: Path
+    dataset: Path, output: Path, number: int, logs: Path, *, opened: bool = False
 ) -> subprocess.Popen[bytes]:
-    """``rig process`` sent ``number`` as soon as its partial store appears; ended."""
+    """``rig process`` sent ``number`` as soon as its partial store appears; ended.
+
+    ``opened``: once the partial store holds its group (zarr opens it by emptying the folder
+    it made, so a signal at first sight may find no folder at that instant).
+    """
     process = _rig("process", str(dataset), "-o", str(output), "--scene-points", SLOW_POINTS,
                    logs=logs)  # fmt: skip
     partial = output.with_name(f".{output.name}.{process.pid}.partial")
     deadline = time.monotonic() + PATIENCE_S
     try:
-        while not partial.exists():
+        while not (partial / "zarr.json").exists() if opened else not partial.exists():
             if process.poll() is not None:
                 raise AssertionError(f"rig process ended ({process.returncode}) before building")
             if time.monotonic() > deadline:
@@ -90,7 +94,7 @@ def test_a_run_after_sigkill_removes_the_partial_left_and_says_so(
     dataset: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     output = tmp_path / "f.zarr"
-    killed = _signalled_while_building(dataset, output, signal.SIGKILL, tmp_path)
+    killed = _signalled_while_building(dataset, output, signal.SIGKILL, tmp_path, opened=True)
     assert killed.returncode == -signal.SIGKILL
     left = _partials(tmp_path)
     assert left == [f".f.zarr.{killed.pid}.partial"]  # a killed process cleans nothing
