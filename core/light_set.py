@@ -16,13 +16,17 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from core.directions import (
     angle_between,
     angles_deg_from_direction,
+    panorama_azimuths,
     panorama_directions,
+    panorama_inclinations,
+    panorama_row_solid_angles,
     panorama_solid_angles,
 )
 from core.errors import DatasetError, InputError
@@ -134,32 +138,82 @@ def grid_lights(rgb: NDArray[np.floating], grid_height: int | None = None) -> Li
     LightSet
         Every block, empty ones included (:meth:`LightSet.nonempty` drops those).
     """
-    image = np.asarray(rgb, dtype=np.float64)
+    image = np.asarray(rgb)
     if image.ndim != 3 or image.shape[2] != 3 or image.shape[1] != 2 * image.shape[0]:
         raise InputError(f"a panorama must have shape (H, 2H, 3), got {image.shape}")
     height, width = image.shape[:2]
-    omega = panorama_solid_angles(height, width)
-    directions = panorama_directions(height, width)
-    energy = image * omega[:, :, None]
     if grid_height is None or grid_height >= height:
+        omega = panorama_solid_angles(height, width)
+        energy = image.astype(np.float64) * omega[:, :, None]
         labels = np.arange(height * width, dtype=np.int32).reshape(height, width)
-        return LightSet(directions.reshape(-1, 3), energy.reshape(-1, 3), omega.ravel(), labels)
+        directions = panorama_directions(height, width).reshape(-1, 3)
+        return LightSet(directions, energy.reshape(-1, 3), omega.ravel(), labels)
     if grid_height < 1:
         raise InputError(f"grid height must be at least 1, got {grid_height}")
-    rows = (np.arange(grid_height) * height) // grid_height
-    cols = (np.arange(2 * grid_height) * width) // (2 * grid_height)
-
-    def blocks(values: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.add.reduceat(np.add.reduceat(values, rows, axis=0), cols, axis=1)
-
-    light = blocks(energy).reshape(-1, 3)
-    weight = energy.sum(axis=2) + 1e-30 * omega  # the geometric centre where there is no light
-    moments = blocks(directions * weight[:, :, None]).reshape(-1, 3)
+    if image.dtype not in (np.float32, np.float64):
+        image = image.astype(np.float64)
+    rows = (np.arange(grid_height + 1) * height) // grid_height
+    cols = (np.arange(2 * grid_height + 1) * width) // (2 * grid_height)
+    theta = panorama_inclinations(height)
+    phi = panorama_azimuths(width)
+    light, moments, area = _grid_blocks(
+        np.ascontiguousarray(image),
+        rows,
+        cols,
+        panorama_row_solid_angles(height, width),
+        np.sin(theta),
+        np.cos(theta),
+        np.cos(phi),
+        np.sin(phi),
+    )
     centroids = moments / np.linalg.norm(moments, axis=1, keepdims=True)
-    block_rows = np.searchsorted(rows, np.arange(height), side="right") - 1
-    block_cols = np.searchsorted(cols, np.arange(width), side="right") - 1
-    labels = (block_rows[:, None] * (2 * grid_height) + block_cols[None, :]).astype(np.int32)
-    return LightSet(centroids, light, blocks(omega[:, :, None])[:, :, 0].ravel(), labels)
+    block_rows = np.repeat(np.arange(grid_height, dtype=np.int32), np.diff(rows))
+    block_cols = np.repeat(np.arange(2 * grid_height, dtype=np.int32), np.diff(cols))
+    labels = block_rows[:, None] * np.int32(2 * grid_height) + block_cols[None, :]
+    return LightSet(centroids, light, area, labels)
+
+
+@numba.njit(cache=True, parallel=True)
+def _grid_blocks(
+    image: NDArray[np.floating],
+    rows: NDArray[np.int64],
+    cols: NDArray[np.int64],
+    omega: NDArray[np.float64],
+    sin_theta: NDArray[np.float64],
+    cos_theta: NDArray[np.float64],
+    cos_phi: NDArray[np.float64],
+    sin_phi: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Per block: radiance x sr (B, 3), the energy-weighted direction sum (B, 3), sr (B,).
+
+    One pass over the pixels, a row of blocks per thread (rows of blocks share no block);
+    the directions are :func:`core.directions.panorama_directions`' from per-row and
+    per-column sines, so no (H, W, 3) array is made. A pixel without light weighs 1e-30 x its
+    solid angle: an empty block's centroid is its geometric centre.
+    """
+    grid_rows = rows.size - 1
+    grid_cols = cols.size - 1
+    light = np.zeros((grid_rows * grid_cols, 3))
+    moments = np.zeros((grid_rows * grid_cols, 3))
+    area = np.zeros(grid_rows * grid_cols)
+    for block_row in numba.prange(grid_rows):
+        for i in range(rows[block_row], rows[block_row + 1]):
+            w = omega[i]
+            for block_col in range(grid_cols):
+                b = block_row * grid_cols + block_col
+                area[b] += w * (cols[block_col + 1] - cols[block_col])
+                for j in range(cols[block_col], cols[block_col + 1]):
+                    r = image[i, j, 0] * w
+                    g = image[i, j, 1] * w
+                    u = image[i, j, 2] * w
+                    light[b, 0] += r
+                    light[b, 1] += g
+                    light[b, 2] += u
+                    weight = r + g + u + 1e-30 * w
+                    moments[b, 0] += weight * sin_theta[i] * cos_phi[j]
+                    moments[b, 1] += weight * sin_theta[i] * sin_phi[j]
+                    moments[b, 2] += weight * cos_theta[i]
+    return light, moments, area
 
 
 def measured_lights_problem(directions: NDArray[np.floating], *, blocked_below: bool) -> str | None:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -101,7 +102,7 @@ class LightSplitter:
         self.count = len(np.asarray(directions))
         self.labels = nearest_sample_labels(directions, height, 2 * height)
         self.outside = outside_pixels(directions, height)
-        self.weight = np.repeat(panorama_row_solid_angles(height, 2 * height), 2 * height)
+        self.omega = panorama_row_solid_angles(height, 2 * height)
 
     def split(self, rgb: NDArray[np.floating]) -> LightSplit:
         """Split ``rgb`` (H, 2H, 3), linear radiance, non-negative."""
@@ -113,18 +114,60 @@ class LightSplitter:
         # Per channel: a coloured lamp is concentrated in its own channel.
         gathered, area = gather_cells(image, self.labels, self.count)
         ceiling = (self.contrast * gathered / np.maximum(area, 1e-300)[:, None]).astype(np.float32)
-        smooth = np.minimum(image, ceiling[self.labels])
-        smooth[self.outside] = 0.0
-        sharp = image - smooth
-        total = float(self.weight @ image.reshape(-1, 3).sum(axis=1, dtype=np.float64))
-        kept = float(self.weight @ sharp.reshape(-1, 3).sum(axis=1, dtype=np.float64))
+        smooth = np.empty_like(image)
+        sharp = np.empty_like(image)
+        smooth_cells = np.zeros((self.count, 3), dtype=np.float64)
+        total, kept = _split_pixels(
+            np.ascontiguousarray(image),
+            self.labels,
+            ceiling,
+            self.outside,
+            self.omega,
+            smooth,
+            sharp,
+            smooth_cells,
+        )
         return LightSplit(
             smooth,
             sharp,
-            gather_cells(smooth, self.labels, self.count)[0],
+            smooth_cells,
             min(max(kept / total if total > 0 else 0.0, 0.0), 1.0),
         )
 
+
+@numba.njit(cache=True)
+def _split_pixels(
+    image: NDArray[np.float32],
+    labels: NDArray[np.int32],
+    ceiling: NDArray[np.float32],
+    outside: NDArray[np.bool_],
+    omega: NDArray[np.float64],
+    smooth: NDArray[np.float32],
+    sharp: NDArray[np.float32],
+    smooth_cells: NDArray[np.float64],
+) -> tuple[float, float]:
+    """Fill ``smooth`` and ``sharp`` (H, W, 3) and gather ``smooth_cells`` (N, 3) in one pass.
+
+    ``ceiling`` (N, 3): each cell's highest smooth radiance; ``omega`` (H,): a pixel's solid
+    angle per row. Returns the whole panorama's and the sharp part's radiance x sr, summed over
+    the channels (one pass: a turning panorama is split anew every frame).
+    """
+    total = 0.0
+    kept = 0.0
+    height, width = labels.shape
+    for i in range(height):
+        w = omega[i]
+        for j in range(width):
+            cell = labels[i, j]
+            for c in range(3):
+                value = image[i, j, c]
+                part = np.float32(0.0) if outside[i, j] else min(value, ceiling[cell, c])
+                smooth[i, j, c] = part
+                sharp[i, j, c] = value - part
+                smooth_cells[cell, c] += part * w
+                total += value * w
+                kept += (value - part) * w
+    return total, kept
 
 def split_light(
     rgb: NDArray[np.floating],

@@ -94,8 +94,10 @@ def _bounded(
 ) -> NDArray[np.float32]:
     """``values`` (Q, P, 3) clipped to [0, :func:`bound_factor` x the brightest measured]."""
     peak = field.camera_slab(camera).max(axis=0)
-    limit = bound_factor(field.light_directions) * peak[None]
-    return np.clip(values, 0.0, limit).astype(np.float32)
+    limit = (bound_factor(field.light_directions) * peak[None]).astype(np.float32)
+    # Straight into float32: a panorama's grid predicts thousands of lights per frame.
+    out = np.empty(np.shape(values), dtype=np.float32)
+    return np.clip(values, np.float32(0.0), limit, out=out)
 
 
 def _basis_frame_directions(
@@ -146,7 +148,11 @@ class _Basis:
     def predict(self, camera: int, directions: NDArray[np.floating]) -> NDArray[np.float32]:
         coefficients = self._fit(camera)
         design = evaluate_basis(self.basis, _basis_frame_directions(self.field, camera, directions))
-        values = np.einsum("qb,pbc->qpc", design, coefficients)
+        # One matrix product (Q, B) @ (B, P x 3): einsum does not reach BLAS for this layout,
+        # and a panorama's grid asks for thousands of lights per frame.
+        points = coefficients.shape[0]
+        flat = coefficients.transpose(1, 0, 2).reshape(coefficients.shape[1], points * 3)
+        values = (design.astype(flat.dtype) @ flat).reshape(len(design), points, 3)
         if self.eight_bit:
             values = srgb_to_linear(np.clip(values / 255.0, 0.0, 1.0)) / self.scale
         return _bounded(self.field, camera, values)
