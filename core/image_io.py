@@ -309,6 +309,34 @@ def _library_output() -> Iterator[list[str]]:
             lines += said.getvalue().splitlines()
 
 
+#: Suffixes whose OpenCV codec cannot work in memory: it goes through a file of its own.
+_THROUGH_A_FILE = (".hdr", ".pic")
+
+
+@contextlib.contextmanager
+def _opencv_scratch(suffix: str) -> Iterator[None]:
+    """For ``suffix``'s codec, point OpenCV's temporary files into a folder removed on exit.
+
+    The Radiance codec encodes and decodes through a file OpenCV names in the temp folder,
+    and leaves that file behind when writing it fails (a full disk); so that nothing is left
+    behind, the file is made in a folder of ours that goes whatever happens. OpenCV reads
+    ``OPENCV_TEMP_PATH`` at every such file.
+    """
+    if suffix not in _THROUGH_A_FILE:
+        yield
+        return
+    previous = os.environ.get("OPENCV_TEMP_PATH")
+    with tempfile.TemporaryDirectory(prefix="rig-opencv-") as folder:
+        os.environ["OPENCV_TEMP_PATH"] = folder
+        try:
+            yield
+        finally:
+            if previous is None:
+                del os.environ["OPENCV_TEMP_PATH"]
+            else:
+                os.environ["OPENCV_TEMP_PATH"] = previous
+
+
 def _read_exr(file: Path) -> NDArray[np.float32]:
     with _library_output() as printed:
         try:
@@ -385,7 +413,7 @@ def _read_with_opencv(file: Path) -> NDArray[Any]:
     # OpenCV decodes a truncated JPEG without complaint; the end-of-image marker tells.
     if suffix in _JPEG_SUFFIXES and data.rfind(b"\xff\xd9", max(0, len(data) - 4096)) < 0:
         raise ImageFileError(f"{file}: JPEG has no end-of-image marker (file truncated?)")
-    with _library_output() as printed:
+    with _library_output() as printed, _opencv_scratch(suffix):
         image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
     if image is None:
         said = _opencv_said(printed)
@@ -425,8 +453,9 @@ def _imwrite(path: Path, bgr: NDArray[Any], params: list[int] | None = None) -> 
 
     Not ``cv2.imwrite``: it reports success on a full disk, leaving a cut or empty file.
     """
-    with _library_output() as printed:
-        ok, encoded = cv2.imencode(path.suffix.lower(), np.ascontiguousarray(bgr), params or [])
+    suffix = path.suffix.lower()
+    with _library_output() as printed, _opencv_scratch(suffix):
+        ok, encoded = cv2.imencode(suffix, np.ascontiguousarray(bgr), params or [])
     if not ok:  # some codecs (Radiance) encode through a temporary file: a full disk fails here
         said = _opencv_said(printed)
         raise ImageFileError(

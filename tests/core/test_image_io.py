@@ -659,7 +659,14 @@ def test_every_writer_refuses_a_full_disk_and_keeps_the_old_file(tmp_path: Path)
         f"target = {str(targets[kind])!r}\nattempt({kind!r}, lambda target=target: {call})"
         for kind, call in _WRITERS.items()
     )
+    # Where OpenCV would put its Radiance file, and the temporary folder: both stay empty.
+    opencv_temp, scratch = tmp_path / "opencv", tmp_path / "scratch"
+    opencv_temp.mkdir()
+    scratch.mkdir()
     found = writes_under_limit(
+        "import os, tempfile\n"
+        f"os.environ['OPENCV_TEMP_PATH'] = {str(opencv_temp)!r}\n"
+        f"tempfile.tempdir = {str(scratch)!r}\n"
         "import numpy as np\n"
         "from core.image_io import (write_exr, write_linear, write_linear16_tiff, write_png16,\n"
         "    write_srgb8, write_uint8)\n"
@@ -673,5 +680,8 @@ def test_every_writer_refuses_a_full_disk_and_keeps_the_old_file(tmp_path: Path)
         said = "OpenCV could not encode" if kind == "hdr" else "the file is larger"
         assert found[kind]["message"].startswith(f"{target}: cannot write: {said}")
         assert target.read_bytes() == b"the previous image"
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(t.name for t in targets.values())
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [*(t.name for t in targets.values()), "opencv", "scratch"]
+    )
+    assert not any(opencv_temp.iterdir()) and not any(scratch.iterdir())
     assert found["stderr"]["text"] == ""  # no library's own complaint besides the error
