@@ -43,6 +43,11 @@ CLI_METHODS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("--scheme pixels --interp barycentric", ("--scheme", "pixels", "--interp", "barycentric")),
     ("--scheme model", ("--scheme", "model")),
     ("--paper", ("--paper",)),
+    # The RTI tools' interpolation and fits, every grid light of the panorama predicted (what
+    # a user of those tools would do); linear fits, as the capture is 16-bit linear.
+    ("--method rbf", ("--method", "rbf")),
+    ("--method ptm", ("--method", "ptm")),
+    ("--method hsh3", ("--method", "hsh3")),
 )
 #: The default with nothing given (its choice includes training a network): with ``--slow``.
 SLOW_CLI_METHODS: tuple[tuple[str, tuple[str, ...]], ...] = (("rig relight (default)", ()),)
@@ -166,6 +171,7 @@ def chart(records: Records, path: Path) -> None:
     groups = [(scene, dome) for scene, domes in records.items() for dome in domes]
     figure, axes = plt.subplots(figsize=(max(8.0, 1.6 * len(groups)), 4.5))
     width = 0.8 / len(methods)
+    palette = plt.get_cmap("tab20")  # more methods than the default cycle's ten colours
     for k, method in enumerate(methods):
         heights = []
         for scene, dome in groups:
@@ -173,7 +179,7 @@ def chart(records: Records, path: Path) -> None:
             value = _panorama_mean(panos, method, "rel_rmse")
             heights.append(np.nan if value is None else 100 * value)
         axes.bar(np.arange(len(groups)) + (k - 0.5 * (len(methods) - 1)) * width, heights,
-                 width, label=method)  # fmt: skip
+                 width, label=method, color=palette(k % 20))  # fmt: skip
     axes.set_xticks(np.arange(len(groups)), [f"{s}\n{d} lights" for s, d in groups], fontsize=8)
     axes.set_ylabel("relative RMSE vs path-traced truth, %\n(mean over panoramas)")
     axes.legend(fontsize=7)
