@@ -178,20 +178,17 @@ def _summed_error(
     field: ReflectanceField,
     panorama: Panorama,
     name: str,
-    fit: NDArray[np.int64],
+    part: ReflectanceField,
     test: NDArray[np.int64],
     models: SampleModels | None = None,
 ) -> float:
-    """Relative RMSE of ``name`` fitted on ``fit``, its ``test`` predictions summed alike.
+    """Relative RMSE of ``name`` fitted on ``part``, its ``test`` predictions summed alike.
 
-    ``models``: a fit of the whole field, used when ``fit`` is every light.
+    ``part``: ``field`` itself, or its subset of the fit lights; ``models``: a fit of
+    ``part``.
     """
     weights, truth = _weighted_truth(field, panorama, test)
-    whole = len(fit) == field.shape[1]
-    part = field if whole else field.subset(lights=fit)
-    predictor = make_predictor(
-        part, "nearest" if name == LIGHT_STAGE else name, models=models if whole else None
-    )
+    predictor = make_predictor(part, "nearest" if name == LIGHT_STAGE else name, models=models)
     predicted = predictor.predict(0, field.light_directions[test])
     estimate = np.einsum("qc,qpc->pc", weights, predicted.astype(np.float64))
     seen = field.visibility[0]
@@ -259,20 +256,24 @@ def choose_environment_mode(
     bar = progress_bar(total=len(names) * len(splits), desc="choosing", unit="method")
     everything = np.arange(field.shape[1], dtype=np.int64)
     ratios = [_gap_ratio(field, panorama, split, below=i > 0) for i, split in enumerate(splits)]
+    inside: dict[str, float] = {}
     try:
         for ratio, (_, fit, test, weight) in zip(ratios, splits, strict=True):
+            # One part per split for every candidate: the rungs built on one model fit it once.
+            part = field.subset(lights=fit)
             for name in names:
                 start = time.perf_counter()
                 if name not in notes:
                     try:
-                        error = _summed_error(field, panorama, name, fit, test)
+                        error = _summed_error(field, panorama, name, part, test)
                         # The use's gaps are narrower than a held-out light's: the excess over
                         # the error at the measured lights shrinks (rung_choice.UseGaps).
-                        inside = _summed_error(
-                            field, panorama, name, everything, everything, models
-                        )
-                        excess = max(error**2 - inside**2, 0.0) * ratio**GAP_EXPONENT
-                        errors[name].append(weight * math.sqrt(inside**2 + excess))
+                        if name not in inside:
+                            inside[name] = _summed_error(
+                                field, panorama, name, field, everything, models
+                            )
+                        excess = max(error**2 - inside[name] ** 2, 0.0) * ratio**GAP_EXPONENT
+                        errors[name].append(weight * math.sqrt(inside[name] ** 2 + excess))
                     except InputError as problem:  # a basis with more terms than the lights
                         notes[name] = str(problem)
                 seconds[name] += time.perf_counter() - start
