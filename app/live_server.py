@@ -255,7 +255,7 @@ class _Viewer:
             "modulations": list(s.modulations),
             "modes": {
                 "paper": s.mode(self.controls.updated({"mode": "paper"})).describe(),
-                "best": s.best.reason,
+                "best": s.best_reason(self.controls.panorama),
             },
             "live_modes": list(LIVE_MODES),
             "samplers": list(SAMPLERS),
@@ -464,11 +464,15 @@ async def _send_picture(socket: web.WebSocketResponse, tag: str, picture: Any) -
 
 
 async def _send_frame(
-    socket: web.WebSocketResponse, sequence: int, frame: LiveFrame, idle: dict[str, str]
+    socket: web.WebSocketResponse,
+    sequence: int,
+    frame: LiveFrame,
+    idle: dict[str, str],
+    best: str,
 ) -> None:
     await socket.send_json({
         "type": "frame", "seq": sequence, "controls": frame.controls.to_json(),
-        "mode": frame.mode, "notes": list(frame.notes),
+        "mode": frame.mode, "best": best, "notes": list(frame.notes),
         "ms": {k: round(v * 1000.0, 2) for k, v in frame.seconds.items()},
         "points": int(frame.image.needed.sum()),
         "idle": idle,
@@ -501,7 +505,8 @@ async def _live(request: web.Request) -> web.WebSocketResponse:
                 continue
             viewer.controls = controls
             idle = viewer.session.idle_controls(controls)
-            await _send_frame(socket, sequence, frame, idle)
+            best = viewer.session.best_reason(controls.panorama)
+            await _send_frame(socket, sequence, frame, idle, best)
             if viewer.session.refinable(controls):
                 # Interactive frames are precomputed; once the person stops, the exact sum.
                 with contextlib.suppress(TimeoutError):
@@ -511,7 +516,7 @@ async def _live(request: web.Request) -> web.WebSocketResponse:
                 sequence += 1
                 exact = controls.updated({"exact": True})
                 frame = await viewer.run(viewer.session.render, exact)
-                await _send_frame(socket, sequence, frame, idle)
+                await _send_frame(socket, sequence, frame, idle, best)
             if wanted.is_set():
                 continue  # the next frame is wanted: its warnings, not these
             warnings = await viewer.run(viewer.session.warnings)

@@ -3,13 +3,15 @@
 A live relighting session: the viewer's state, and one frame per change of its controls.
 
 The browser viewer (``rig view``) is a page over this class. The session holds the field, the
-two modes a person switches between (the paper's configuration and the mode chosen for the
-field by held-out lights, :func:`render.engines.modes.most_accurate_mode`) and the loaded
-panoramas and modulation maps. Each frame is a :class:`render.relighting.RelightRequest` run
-through the library's relighting, as ``rig relight`` runs one, kept in a
-:class:`render.relighting.RelightingCache` so that a change costs what it changes: a new yaw,
-exposure or panorama relights, an orbit or zoom re-plans the view, a new K or sampler opens the
-paper's mode anew (its engine holds no precomputation).
+two modes a person switches between (the paper's configuration and the best mode: for a field
+of points the mode chosen by held-out lights, :func:`render.engines.modes.most_accurate_mode`;
+for a field of pixels, an RTI capture, ``rig relight --env --fast``'s choice under each
+panorama, :func:`render.environment_choice.choose_environment_mode`, made once a panorama at
+its first frame and kept as it turns) and the loaded panoramas and modulation maps. Each frame
+is a :class:`render.relighting.RelightRequest` run through the library's relighting, as ``rig
+relight`` runs one, kept in a :class:`render.relighting.RelightingCache` so that a change costs
+what it changes: a new yaw, exposure or panorama relights, an orbit or zoom re-plans the view,
+a new K or sampler opens the paper's mode anew (its engine holds no precomputation).
 
 Controls are plain data (:class:`LiveControls`, built from the page's JSON with every value
 checked); a frame (:class:`LiveFrame`) carries the 8-bit pictures the page shows, the linear
@@ -41,6 +43,7 @@ from processing.sampling import SAMPLERS, SamplerName
 from render.engines.interpolated import RelightSettings, RelitImage
 from render.engines.models import ModelRelightSettings
 from render.engines.modes import ModeChoice, RelightMode
+from render.environment_choice import EnvironmentChoice, choose_environment_mode
 from render.output import display_picture
 from render.overlay import sample_overlay
 from render.relighting import (
@@ -301,6 +304,7 @@ class LiveSession:
         self._panorama_pictures: dict[tuple[Any, ...], NDArray[np.uint8]] = {}
         self._truths: dict[tuple[Any, ...], tuple[NDArray[np.float32], NDArray[np.bool_]]] = {}
         self._warnings: dict[tuple[Any, ...], tuple[str, ...]] = {}
+        self._choices: dict[str, EnvironmentChoice] = {}
         self.frame: LiveFrame | None = None
         self._outside_checked: PinholeCamera | None = None
         start = field.cameras[0]
@@ -340,6 +344,38 @@ class LiveSession:
         for cache in (self._panorama_pictures, self._truths, self._warnings):
             for key in [key for key in cache if name in key]:
                 del cache[key]
+        self._choices.pop(name, None)
+
+    def environment_choice(self, name: str) -> EnvironmentChoice | None:
+        """The best mode's choice under panorama ``name`` (None for a field of points).
+
+        Made at the panorama's first frame (seconds: each quick rung is fitted on held-out
+        lights; the learned rung, minutes, is left out as by ``--fast``) and kept while the
+        panorama turns: the rung that relights its sharp light best stays the best.
+        """
+        if self.field.sample_kind != "pixels":
+            return None
+        if name not in self._choices:
+            seen = PanoramaControls().as_seen(self.panoramas[name], self.field)
+            self._choices[name] = choose_environment_mode(
+                self.field, seen, models=self.best.models, fast=True
+            )
+        return self._choices[name]
+
+    def best_reason(self, name: str) -> str:
+        """Why the best mode relights as it does under panorama ``name``.
+
+        Quick: a choice not made yet is said to come with the panorama's first frame.
+        """
+        if self.field.sample_kind != "pixels":
+            return self.best.reason
+        choice = self._choices.get(name)
+        if choice is None:
+            return (
+                f"the rung that relights under {name} best is chosen at its first frame, by "
+                "held-out lights (seconds)"
+            )
+        return choice.reason
 
     def mode(self, controls: LiveControls) -> RelightMode:
         """The relighting mode of the controls."""
@@ -347,7 +383,8 @@ class LiveSession:
             return replace(
                 RelightSettings.paper_configuration(k=controls.k), sampler=controls.sampler
             )
-        mode = self.best.mode
+        choice = self.environment_choice(controls.panorama)
+        mode = self.best.mode if choice is None else choice.mode
         if mode.sampled_k is not None:
             mode = replace(mode, k=controls.k, sampler=controls.sampler)  # type: ignore[type-var]
         exact_models = isinstance(mode, ModelRelightSettings) and mode.lighting == "grid"
@@ -444,10 +481,10 @@ class LiveSession:
         mode = self.mode(controls)
         if mode.sampled_k is not None:
             return {}
+        described = mode.describe(self.best.models if mode.uses_models else None)
         why = (
-            f"{mode.describe(self.best.models if mode.uses_models else None)} lights with every "
-            "part of the panorama: K, the sampler and a modulation map steer sampled lights "
-            "(the paper's configuration)"
+            f"every part of the panorama lights ({described}): K, the sampler and a modulation "
+            "map steer sampled lights (the paper's configuration)"
         )
         return {"k": why, "sampler": why, "modulation": why}
 
@@ -465,7 +502,7 @@ class LiveSession:
             assert lit is not None  # set with the frame
             found = relighting_warnings(self.field, lit.camera, lit.seen, lit.chosen)
             remedy = "--scheme model"
-            if self.best.mode.uses_models:
+            if self.mode(replace(frame.controls, mode="best")).uses_models:
                 remedy = "the viewer's best mode"
             self._warnings = {
                 key: tuple(str(warning).replace("--scheme model", remedy) for warning in found)
@@ -524,6 +561,6 @@ class LiveSession:
             "controls": controls.to_json(),
             "mode": frame.mode,
             "panorama": self.panoramas[controls.panorama].source,
-            "best_mode_reason": self.best.reason,
+            "best_mode_reason": self.best_reason(controls.panorama),
             "camera": asdict(frame.camera),
         }

@@ -91,10 +91,15 @@ def open_session(
     loaded = panoramas if isinstance(panoramas, dict) else read_panoramas(panoramas)
     stage("choosing the most accurate mode (fitting the models once; a saved fit is reused)")
     choice = most_accurate_mode(field, models_path=models)
-    print(f"best mode: {choice.reason}")
-    return LiveSession(
+    session = LiveSession(
         field, choice, loaded, size=size, truth=field_truth(field.provenance), source=source
     )
+    first = next(iter(session.panoramas))
+    if session.field.sample_kind == "pixels":
+        stage(f"choosing the rung that relights under {first} best (held-out lights)")
+        session.environment_choice(first)
+    print(f"best mode: {session.best_reason(first)}")
+    return session
 
 
 def _run_view(args: argparse.Namespace) -> int:

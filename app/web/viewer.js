@@ -143,6 +143,8 @@ function onMessage(event) {
       $("truth-figure").hidden = $("error-figure").hidden = true;
     }
     showIdle(message.idle || {});
+    // The best mode of a capture is chosen under each panorama: its reason comes with the frame.
+    if (message.best) $("best-reason").textContent = message.best;
   } else if (message.type === "warnings") {
     // Folded to one line (the panorama stays in view); the codes say what they are about.
     $("warnings").replaceChildren(...message.warnings.map((w) => Object.assign(

@@ -147,3 +147,34 @@ def test_a_frame_is_a_relighting_request_adjusted_once(
         relit = relight_request(session.field, request, models=session.best.models)
         assert np.array_equal(relit.image.rgb, orbit.image.rgb) and rotations == [23.0]
         rotations.clear()
+
+
+def test_a_captures_best_mode_is_rig_relights_choice_under_each_panorama(
+    tmp_path: Path, courtyard_path: Path
+) -> None:
+    from core.directions import hemisphere_layout
+    from processing.rti import import_rti
+    from render.environment_choice import choose_environment_mode
+    from render.relighting import PanoramaControls
+    from sim.rti_capture import write_rti_capture
+
+    directions = hemisphere_layout(25, "fibonacci")
+    shading = 0.6 / np.pi * np.clip(directions[:, 2], 0.0, None)
+    images = np.broadcast_to(shading[:, None, None, None], (25, 6, 8, 3))
+    field = import_rti(write_rti_capture(tmp_path / "c", "dome", images, directions, scale=1.0),
+                       tmp_path / "f.zarr")  # fmt: skip
+    sun = np.full((32, 64, 3), 0.05, dtype=np.float32)
+    sun[9, 21] = 4000.0
+    panoramas = {"courtyard": read_panorama(courtyard_path), "sun": Panorama(sun, "sun")}
+    live = LiveSession(field, most_accurate_mode(field), panoramas)
+    assert "chosen at its first frame" in live.best_reason("sun")
+    for name, panorama in panoramas.items():
+        frame = live.render(live.initial.updated({"panorama": name, "yaw_deg": 40.0}))
+        expected = choose_environment_mode(
+            field, PanoramaControls().as_seen(panorama, field), fast=True
+        )
+        assert frame.relight_mode == expected.mode
+        assert live.best_reason(name) == expected.reason
+    # Chosen once a panorama: turning it keeps the choice.
+    again = live.render(live.initial.updated({"panorama": "sun", "yaw_deg": 200.0}))
+    assert again.relight_mode == frame.relight_mode
