@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -27,6 +28,7 @@ import numpy as np
 
 from bench.suite import machine
 from bench.timing import median_ms
+from core.errors import RigError
 from core.sample_data import PANORAMA_NAMES, panorama_path, rti_capture_path
 from processing.panorama import Panorama, read_panorama
 from processing.rti import open_field_or_rti
@@ -115,8 +117,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error(f"--repeats must be at least 1, got {args.repeats}")
-    args.out.mkdir(parents=True, exist_ok=True)
-    rows = measure(args.capture, args.repeats)
+    try:
+        args.out.mkdir(parents=True, exist_ok=True)
+        rows = measure(args.capture, args.repeats)
+    except (RigError, OSError) as error:  # a capture or panorama that cannot be read
+        print(f"python -m bench.turning: {error}", file=sys.stderr)
+        return 2
     document = {"capture": str(args.capture), "machine": machine(), "rows": rows}
     (args.out / "turning.json").write_text(json.dumps(document, indent=2) + "\n")
     chart(rows, args.out / "turning.png")

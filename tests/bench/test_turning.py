@@ -4,6 +4,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from bench.turning import MODES, main
 from core.directions import hemisphere_layout
@@ -23,3 +24,12 @@ def test_every_mode_is_timed_under_every_bundled_panorama(tmp_path: Path) -> Non
     }
     assert all(r["new_yaw_ms"] > 0 for r in rows)
     assert (tmp_path / "out" / "turning.png").stat().st_size > 0
+
+
+def test_a_capture_that_cannot_be_read_is_named_with_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    missing = tmp_path / "none.lp"
+    assert main(["-o", str(tmp_path / "out"), "--capture", str(missing)]) == 2
+    said = capsys.readouterr().err
+    assert str(missing) in said and "Traceback" not in said
