@@ -13,6 +13,7 @@ import errno
 import json
 import os
 import stat
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -26,6 +27,7 @@ __all__ = [
     "write_bytes_atomic",
     "write_json_atomic",
     "write_problem",
+    "writer_tag",
 ]
 
 #: Why a write failed, in words, by errno (the rest say the system's words).
@@ -97,13 +99,23 @@ def _output_problem(target: Path, directory: bool) -> str | None:
     return None
 
 
-def _temporary(target: Path, longest: int) -> Path:
-    """The hidden name beside ``target`` written first, ``.STEM.PID.partial.SUFFIX``.
+def writer_tag() -> str:
+    """``PID.TID``: names a file or folder a writer makes beside its target, its own.
 
-    It keeps the suffix, so writers that pick a format by extension work unchanged; a long
-    stem is shortened to keep the name within the file system's limit.
+    Two threads of one process (a viewer's session and its light view both saving a field's
+    fit) would otherwise write, rename or remove each other's temporary files.
     """
-    tail = f".{os.getpid()}.partial{target.suffix}"
+    return f"{os.getpid()}.{threading.get_native_id()}"
+
+
+def _temporary(target: Path, longest: int) -> Path:
+    """The hidden name beside ``target`` written first, ``.STEM.PID.TID.partial.SUFFIX``.
+
+    Its own for each process and thread (:func:`writer_tag`). It keeps the suffix, so writers
+    that pick a format by extension work unchanged; a long stem is shortened to keep the name
+    within the file system's limit.
+    """
+    tail = f".{writer_tag()}.partial{target.suffix}"
     room = longest - len(os.fsencode(tail)) - 1
     stem = os.fsencode(target.stem)[: max(room, 0)].decode("utf-8", errors="ignore")
     return target.with_name(f".{stem}{tail}")

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from core.atomic import atomic_path, output_problem, write_problem
+from core.atomic import atomic_path, output_problem, write_problem, writer_tag
 from core.errors import DatasetError, InputError
 from core.field_store import ReflectanceField, companion_paths
 from processing.sample_models import (
@@ -133,7 +133,7 @@ def fit_to_file(
     The file is the one :func:`write_sample_models` writes of :func:`fit_sample_models`'s
     result (the same arrays, read back by :func:`read_sample_models`), but no fit is ever held
     whole: each block's arrays are written at their place in a part file per array beside
-    ``path`` (``.NAME.PID.parts/``), and once every block is in, the parts are copied into
+    ``path`` (``.NAME.PID.TID.parts/``), and once every block is in, the parts are copied into
     the ``.npz`` archive one after the other and removed. Memory: one block and its fits
     (:func:`processing.sample_models.fitting.fit_blocks`); disk: the fit twice, for a moment.
 
@@ -152,7 +152,7 @@ def fit_to_file(
     if problem is not None:
         raise InputError(problem)
     target.parent.mkdir(parents=True, exist_ok=True)
-    parts = target.with_name(f".{target.name}.{os.getpid()}.parts")
+    parts = target.with_name(f".{target.name}.{writer_tag()}.parts")
     shutil.rmtree(parts, ignore_errors=True)
     parts.mkdir()
     specs = layout.arrays()

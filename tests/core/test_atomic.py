@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +23,7 @@ def test_the_target_appears_only_when_the_block_succeeds(tmp_path: Path) -> None
     with atomic_path(target) as temporary:
         # A hidden name beside the target that keeps its suffix (writers choose by extension).
         assert temporary.parent == tmp_path
-        assert temporary.name == f".picture.{os.getpid()}.partial.png"
+        assert temporary.name == f".picture.{os.getpid()}.{threading.get_native_id()}.partial.png"
         assert temporary.suffix == ".png"
         temporary.write_bytes(b"complete")
         assert not target.exists()  # nothing under the real name while it is being written
@@ -226,3 +227,30 @@ def test_write_json_atomic_round_trips(tmp_path: Path, document: Any) -> None:
     write_json_atomic(target, document)  # the same name each time: each write replaces
     assert json.loads(target.read_text(encoding="utf-8")) == document
     assert [p.name for p in tmp_path.iterdir()] == ["round-trip.json"]
+
+
+def test_threads_saving_one_file_each_write_it_whole(tmp_path: Path) -> None:
+    # A viewer's session and its light view both save a field's fit: each thread's temporary
+    # file is its own, so neither renames the other's away (that failed as "No such file").
+    target = tmp_path / "fit.npz"
+    started = threading.Barrier(4)
+    failures: list[BaseException] = []
+
+    def save(byte: int) -> None:
+        started.wait()
+        try:
+            for _ in range(50):
+                with atomic_path(target) as temporary:
+                    temporary.write_bytes(bytes([byte]) * 100_000)
+        except BaseException as error:
+            failures.append(error)
+
+    threads = [threading.Thread(target=save, args=(b,)) for b in range(4)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert failures == []
+    data = target.read_bytes()
+    assert len(data) == 100_000 and len(set(data)) == 1  # one writer's file, whole
+    assert [p.name for p in tmp_path.iterdir()] == ["fit.npz"]
