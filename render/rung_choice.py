@@ -41,7 +41,7 @@ from core.colour import linear_to_srgb
 from core.directions import angle_between
 from core.errors import InputError
 from core.field_store import ReflectanceField
-from core.progress import ProgressBar, progress_bar
+from core.progress import progress_bar
 from processing.image_quality import display_scale
 from processing.learned_rti_training import TrainingSettings
 from processing.measured_region import MeasuredRegion
@@ -250,12 +250,33 @@ def choose_light_rung(
         for name in names:
             start = time.perf_counter()
             try:
-                trials[name] = _trial(
-                    field, name, folds, measured, truths, scale, keep, bar, learned
-                )
-            except InputError as error:  # a basis with more terms than a fold's lights
+                predictor = make_predictor(field, name, learned=learned)
+                at_measured = predictor.predict(0, field.light_directions)[:, seen]
+                trials[name] = _Trial(predictor, _mse(at_measured, measured, scale), [],
+                                      at_measured if keep else None, [])  # fmt: skip
+            except InputError as error:  # a basis with more terms than the lights
                 notes[name] = str(error)
-            seconds[name] = time.perf_counter() - start
+            seconds[name] += time.perf_counter() - start
+            bar.update()
+        for (_, fit, test), truth in zip(folds, truths, strict=True):
+            # One part per fold for every candidate: the rungs built on one model (the model,
+            # its residual, the adaptive mixture) fit it once there. One fold at a time, as
+            # each part is a copy of most of the field.
+            part = field.subset(lights=fit)
+            for name in list(trials):
+                start = time.perf_counter()
+                try:
+                    predicted = make_predictor(part, name, learned=learned).predict(
+                        0, field.light_directions[test]
+                    )[:, seen]
+                except InputError as error:  # a basis with more terms than a fold's lights
+                    notes[name] = str(error)
+                    del trials[name]
+                else:
+                    trials[name].folds.append(_mse(predicted, truth, scale))
+                    trials[name].held_out.append(predicted if keep else predicted[:0])
+                seconds[name] += time.perf_counter() - start
+                bar.update()
     finally:
         bar.close()
     if not trials:
@@ -291,36 +312,12 @@ class _Trial:
     held_out: list[NDArray[np.float32]]  # per fold (Q_f, N, 3) linear (for the mixture)
 
 
-def _trial(
-    field: ReflectanceField,
-    name: str,
-    folds: list[Fold],
-    measured: NDArray[np.float32],
-    truths: list[NDArray[np.float32]],
-    scale: float,
-    keep: bool,
-    bar: ProgressBar,
-    learned: TrainingSettings | None,
-) -> _Trial:
-    seen = field.visibility[0]
-
-    def mse(predicted: NDArray[np.float32], truth: NDArray[np.float32]) -> NDArray[np.float64]:
-        difference = _display(predicted, scale) - truth
-        return np.mean(difference.astype(np.float64) ** 2, axis=(0, 2))
-
-    predictor = make_predictor(field, name, learned=learned)
-    at_measured = predictor.predict(0, field.light_directions)[:, seen]
-    bar.update()
-    errors, held_out = [], []
-    for (_, fit, test), truth in zip(folds, truths, strict=True):
-        predicted = make_predictor(field.subset(lights=fit), name, learned=learned).predict(
-            0, field.light_directions[test]
-        )[:, seen]
-        errors.append(mse(predicted, truth))
-        held_out.append(predicted if keep else predicted[:0])
-        bar.update()
-    return _Trial(predictor, mse(at_measured, measured), errors,
-                  at_measured if keep else None, held_out)  # fmt: skip
+def _mse(
+    predicted: NDArray[np.float32], truth: NDArray[np.float32], scale: float
+) -> NDArray[np.float64]:
+    """Per-pixel mean squared error (N,) of linear ``predicted`` (Q, N, 3) on the display levels."""
+    difference = _display(predicted, scale) - truth
+    return np.mean(difference.astype(np.float64) ** 2, axis=(0, 2))
 
 
 @dataclass(frozen=True)
