@@ -1,6 +1,8 @@
-"""Over 500 lines because the routes, the viewer state they share and the server are one app.
+"""The browser viewer's state and its page's routes: a page, and frames over a WebSocket.
 
-The browser viewer's server: a page, and frames over a WebSocket (``rig view``).
+The directional light's routes are :mod:`app.light_routes`, the uploads'
+:mod:`app.upload_routes`; the server that runs them all (``rig view``: start, serve, stop) is
+:mod:`app.viewer_server`.
 
 The server is aiohttp: one well-kept library for the static page, the small JSON routes,
 uploads and the WebSocket the frames stream over, on asyncio, with no framework or build step
@@ -22,24 +24,19 @@ Routes
                               one, so the page never queues stale frames. A frame of
                               precomputed lighting is followed, once no control has changed for
                               0.3 s, by the exact frame (``"exact": true`` in its controls).
-``POST /api/panorama?name=F``  a panorama file (EXR, HDR, PNG, JPEG) in the body
-``POST /api/modulation?name=F`` a modulation map (PNG, EXR, ...) in the body
 ``GET /api/frame.png``, ``/api/frame.exr``  the current frame (tone-mapped, or linear + alpha)
 ``GET /api/settings.json``    the current settings
 
 The server binds 127.0.0.1 by default: the viewer has no authentication, so exposing it on a
 network is the user's explicit choice (``--host``), and a warning says what it exposes and how
-to tunnel over SSH instead. Names from a request (an upload's, a path under ``/rti/``) are
-checked before they name a file: the last part only, no control character, at most 255 bytes.
+to tunnel over SSH instead (:func:`app.viewer_server.exposure_warning`).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import ipaddress
 import json
-import sys
 import tempfile
 import threading
 import time
@@ -47,10 +44,9 @@ import traceback
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from functools import partial
 from importlib import resources
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 from aiohttp import WSMsgType, web
 
@@ -59,18 +55,18 @@ from core.errors import InputError, RigError
 from core.field_store import ReflectanceField
 from core.image_io import encode_picture
 from core.progress import ProgressEvent, reporting_to
-from processing.environment import read_modulation_map
-from processing.panorama import read_panorama
 from processing.sampling import SAMPLERS
 from render.live_session import LIVE_MODES, ZOOM_RANGE, LiveControls, LiveFrame, LiveSession
 from render.output import write_image
 
 __all__ = [
     "FRAME_JPEG_QUALITY",
+    "MAX_UPLOAD_BYTES",
+    "NO_LIGHT_VIEW",
+    "VIEWER",
     "PendingSession",
-    "ViewerServer",
-    "exposure_warning",
-    "start_viewer",
+    "add_session_routes",
+    "json_error",
 ]
 
 #: A pending session over a field of pixels larger than this (pixels) opens on the page's
@@ -82,18 +78,11 @@ FRAME_JPEG_QUALITY = 90
 REFINE_AFTER_S = 0.3
 #: Largest upload (a 4k x 2k float EXR panorama is ~100 MB).
 MAX_UPLOAD_BYTES = 256 * 1024 * 1024
-#: Longest name of an upload, bytes (what Linux file systems hold).
-MAX_NAME_BYTES = 255
 #: The first byte of each binary WebSocket message: which picture follows.
 PICTURE_TAGS = {"frame": 1, "panorama": 2, "truth": 3, "error": 4}
 #: What a route of the light view answers (404) over a field of points.
 NO_LIGHT_VIEW = "a field of points has no directional light view"
 _WEB = "web"
-_SUFFIXES = {".exr", ".hdr", ".png", ".jpg", ".jpeg", ".tif", ".tiff"}
-#: A light asked of the light view: a direction (x, y, z) in the camera frame.
-_Light = tuple[float, float, float]
-_Part = TypeVar("_Part", CapturedLight, ChosenLight)
-_Drawn = TypeVar("_Drawn")
 
 
 def _page_file(name: str) -> bytes:
@@ -228,7 +217,9 @@ class _Viewer:
     def session(self) -> LiveSession:
         """The open session (the routes that need it answer 503 until it is)."""
         if self._session is None:
-            raise _error(web.HTTPServiceUnavailable, self.error or f"the viewer is {self.status}")
+            raise json_error(
+                web.HTTPServiceUnavailable, self.error or f"the viewer is {self.status}"
+            )
         return self._session
 
     async def run(self, call: Any, *args: Any) -> Any:
@@ -267,7 +258,8 @@ class _Viewer:
 VIEWER = web.AppKey("viewer", _Viewer)
 
 
-def _error(status: type[web.HTTPException], message: str) -> web.HTTPException:
+def json_error(status: type[web.HTTPException], message: str) -> web.HTTPException:
+    """An HTTP error whose body is ``{"error": message}`` (the page shows the message)."""
     return status(text=json.dumps({"error": message}), content_type="application/json")
 
 
@@ -282,74 +274,6 @@ async def _static(request: web.Request) -> web.Response:
     return web.Response(body=_page_file(name), content_type=kinds[name])
 
 
-async def _light(request: web.Request) -> web.Response:
-    light = request.app[VIEWER].light
-    if light is None:
-        raise _error(web.HTTPNotFound, NO_LIGHT_VIEW)
-    viewer = request.app[VIEWER]
-    chosen, captured = viewer.chosen, viewer.captured
-    assert chosen is not None and captured is not None  # made with the light view
-    height, width = viewer.field.image_shape or (0, 0)
-    return web.json_response({
-        "image": {"width": width, "height": height},
-        **light.describe(),
-        "chosen": {
-            "status": chosen.status, "method": chosen.method, "unavailable": chosen.available(),
-        },
-        "captured": {
-            "width": captured.size[0], "height": captured.size[1],
-            "lights": len(captured.directions),
-        },
-    })  # fmt: skip
-
-
-def _asked_light(request: web.Request, part: _Part | None) -> tuple[_Part, _Light]:
-    """The light view's ``part`` a picture is asked of, and the light ``?x=X&y=Y&z=Z``."""
-    if part is None:
-        raise _error(web.HTTPNotFound, NO_LIGHT_VIEW)
-    try:
-        x, y, z = (float(request.query[axis]) for axis in "xyz")
-    except (KeyError, ValueError):
-        raise _error(web.HTTPBadRequest, "send the light as ?x=X&y=Y&z=Z (numbers)") from None
-    return part, (x, y, z)
-
-
-async def _drawn(executor: ThreadPoolExecutor | None, draw: Callable[[], _Drawn]) -> _Drawn:
-    """``draw()`` run on ``executor`` (None: the loop's default); the project's errors are 400."""
-    try:
-        return await asyncio.get_running_loop().run_in_executor(executor, draw)
-    except RigError as error:
-        raise _error(web.HTTPBadRequest, str(error)) from None
-
-
-async def _captured_picture(request: web.Request) -> web.Response:
-    captured, light = _asked_light(request, request.app[VIEWER].captured)
-    # Not on the light worker: this picture is what the page shows while that one works.
-    png, index = await _drawn(None, partial(captured.picture, light))
-    return web.Response(body=png, content_type="image/png", headers={"X-Light": str(index)})
-
-
-async def _chosen_picture(request: web.Request) -> web.Response:
-    viewer = request.app[VIEWER]
-    chosen, light = _asked_light(request, viewer.chosen)
-    png = await _drawn(
-        viewer.light_worker, partial(chosen.picture, light, check=viewer.check_running)
-    )
-    return web.Response(body=png, content_type="image/png")
-
-
-async def _light_file(request: web.Request) -> web.FileResponse:
-    light = request.app[VIEWER].light
-    relative = request.match_info["path"]
-    path = None
-    if light is not None and _name_problem(relative, limit=4096) is None:
-        with contextlib.suppress(OSError, ValueError):  # a name no file system holds
-            path = light.file(relative)
-    if path is None:
-        raise _error(web.HTTPNotFound, f"{request.match_info['path']}: no such file of the export")
-    return web.FileResponse(path)
-
-
 async def _open_session(request: web.Request) -> web.Response:
     viewer = request.app[VIEWER]
     viewer.open_session()
@@ -361,76 +285,12 @@ async def _state(request: web.Request) -> web.Response:
     return web.json_response(viewer.state())
 
 
-def _name_problem(name: str, *, limit: int = MAX_NAME_BYTES) -> str | None:
-    """Why ``name`` (from a request) cannot name a file here, or None.
-
-    A control character (a NUL byte ends a name for the operating system) or more bytes than
-    a file system holds: refused with the reason rather than failing in the middle of a write.
-    """
-    control = next((c for c in name if ord(c) < 32 or ord(c) == 127), None)
-    if control is not None:
-        return (
-            f"{name[:40]!r}: a file name cannot hold the control character {control!r}; rename "
-            "the file"
-        )
-    size = len(name.encode("utf-8", "surrogateescape"))
-    if size > limit:
-        return f"{name[:40]}...: the name is {size} bytes long, at most {limit}; rename the file"
-    return None
-
-
-async def _upload(request: web.Request, kind: str) -> web.Response:
-    viewer = request.app[VIEWER]
-    # Only the last part of the name: "../../x.exr" is stored as x.exr, in a folder of its own.
-    name = Path(request.query.get("name", "")).name
-    problem = _name_problem(name)
-    if problem is not None:
-        raise _error(web.HTTPBadRequest, problem)
-    suffix = Path(name).suffix.lower()
-    if suffix not in _SUFFIXES:
-        raise _error(web.HTTPBadRequest, f"{name or 'the upload'}: send one of "
-                     f"{', '.join(sorted(_SUFFIXES))} with ?name=FILE")  # fmt: skip
-    body = await request.read()
-    if not body:
-        raise _error(web.HTTPBadRequest, f"{name}: the upload is empty")
-    folder = Path(tempfile.mkdtemp(dir=viewer.uploads))
-    path = folder / name
-    try:
-        path.write_bytes(body)
-    except OSError as error:  # a full disk
-        path.unlink(missing_ok=True)
-        raise _error(
-            web.HTTPInsufficientStorage, f"{name}: cannot store the upload: {error.strerror}"
-        ) from None
-
-    def load() -> None:
-        if kind == "panorama":
-            panorama = read_panorama(path, resample=True)
-            viewer.session.add_panorama(name, panorama)
-        else:
-            viewer.session.add_modulation(name, read_modulation_map(path))
-
-    try:
-        await viewer.run(load)
-    except RigError as error:
-        raise _error(web.HTTPBadRequest, str(error)) from None
-    return web.json_response({"name": name, **viewer.state()})
-
-
-async def _panorama(request: web.Request) -> web.Response:
-    return await _upload(request, "panorama")
-
-
-async def _modulation(request: web.Request) -> web.Response:
-    return await _upload(request, "modulation")
-
-
 async def _frame_file(request: web.Request) -> web.Response:
     viewer = request.app[VIEWER]
     suffix = request.match_info["suffix"]
     frame = viewer.session.frame
     if frame is None:
-        raise _error(web.HTTPNotFound, "no frame has been rendered yet")
+        raise json_error(web.HTTPNotFound, "no frame has been rendered yet")
     if suffix == "png":
         _, body = encode_picture(frame.picture, ".png")
     else:
@@ -438,7 +298,7 @@ async def _frame_file(request: web.Request) -> web.Response:
         try:
             write_image(path, frame.image.rgb, frame.image.coverage)
         except RigError as error:  # a full disk: the write is checked
-            raise _error(web.HTTPInsufficientStorage, str(error)) from None
+            raise json_error(web.HTTPInsufficientStorage, str(error)) from None
         body = path.read_bytes()
     return web.Response(
         body=body,
@@ -452,7 +312,7 @@ async def _settings(request: web.Request) -> web.Response:
     try:
         settings = viewer.session.settings()
     except InputError as error:
-        raise _error(web.HTTPNotFound, str(error)) from None
+        raise json_error(web.HTTPNotFound, str(error)) from None
     return web.json_response(
         settings, headers={"Content-Disposition": 'attachment; filename="settings.json"'}
     )
@@ -565,167 +425,14 @@ async def _live(request: web.Request) -> web.WebSocketResponse:
     return socket
 
 
-def build_app(session: LiveSession | PendingSession, uploads: Path) -> web.Application:
-    """The aiohttp application of the viewer over ``session``."""
-    app = web.Application(client_max_size=MAX_UPLOAD_BYTES)
+def add_session_routes(app: web.Application, session: LiveSession | PendingSession,
+                       uploads: Path) -> None:  # fmt: skip
+    """The viewer over ``session`` (uploads stored under ``uploads``) and its page's routes."""
     app[VIEWER] = _Viewer(session, uploads)
     app.router.add_get("/", _index)
     app.router.add_get("/{name:viewer\\.js|viewer\\.css|light\\.js}", _static)
-    app.router.add_get("/api/light", _light)
-    app.router.add_get("/api/light/chosen.png", _chosen_picture)
-    app.router.add_get("/api/light/captured.png", _captured_picture)
-    app.router.add_get("/rti/{path:.+}", _light_file)
     app.router.add_get("/api/state", _state)
     app.router.add_post("/api/open", _open_session)
     app.router.add_get("/api/live", _live)
-    app.router.add_post("/api/panorama", _panorama)
-    app.router.add_post("/api/modulation", _modulation)
     app.router.add_get("/api/frame.{suffix:png|exr}", _frame_file)
     app.router.add_get("/api/settings.json", _settings)
-    return app
-
-
-#: Seconds a request under way (a frame being streamed, an upload) gets to finish once the
-#: viewer stops; then it is cancelled and its socket closed. An open page holds its WebSocket
-#: for as long as it is open: aiohttp's default (60 s) would keep Ctrl-C waiting that long.
-STOP_GRACE_S = 1.0
-#: Seconds :meth:`ViewerServer.stop` waits for the server's loop to shut down and stop.
-STOP_TIMEOUT_S = 10.0
-#: Seconds of waiting for the work under way when stopping before saying so.
-STOP_NOTICE_S = 1.0
-
-
-@dataclass
-class ViewerServer:
-    """A running viewer: its URL, and how to stop it.
-
-    ``_stopped`` is set by the loop's thread once its loop has stopped: the only sign of it
-    to trust after an interrupted :meth:`wait`. (On Python 3.11 a ``Thread.join`` that
-    Ctrl-C interrupts marks the thread finished while it runs on, so a later ``join`` returns
-    at once; closing the loop then failed with "Cannot close a running event loop".)
-    """
-
-    url: str
-    _loop: asyncio.AbstractEventLoop
-    _runner: web.AppRunner
-    _thread: threading.Thread
-    _uploads: tempfile.TemporaryDirectory[str]
-    _stopped: threading.Event
-
-    def stop(self) -> None:
-        """Stop serving, let the render under way finish, and remove the uploads.
-
-        Safe after an interrupted :meth:`wait` and when called twice. The runner is shut
-        down inside the loop (its sockets, the requests under way, the tasks left), then
-        the loop is stopped from this thread and closed once it no longer runs.
-        """
-        if not self._stopped.is_set():
-            shutdown = asyncio.run_coroutine_threadsafe(self._shutdown(), self._loop)
-            with contextlib.suppress(TimeoutError):  # the loop is stopped all the same
-                shutdown.result(timeout=STOP_TIMEOUT_S)
-            self._loop.call_soon_threadsafe(self._loop.stop)
-            self._stopped.wait(timeout=STOP_TIMEOUT_S)
-        if self._stopped.is_set() and not self._loop.is_closed():
-            self._loop.close()
-        # A frame under way on a worker ends, and what is queued behind it is dropped; the
-        # session's opening and the chosen method's choice stop at their next stage or step
-        # (their hooks raise once the viewer stops). What remains may take a while, so the
-        # person who pressed Ctrl-C is told rather than left waiting in silence.
-        viewer = self._runner.app[VIEWER]
-        viewer.stopping.set()
-        workers = (viewer.worker, viewer.light_worker)
-        for worker in workers:
-            worker.shutdown(wait=False, cancel_futures=True)
-
-        def finish() -> None:
-            for worker in workers:
-                worker.shutdown()
-
-        finishing = threading.Thread(target=finish, name="rig-view-stop", daemon=True)
-        finishing.start()
-        finishing.join(timeout=STOP_NOTICE_S)
-        if finishing.is_alive():
-            print("rig view: waiting for the work under way to finish", file=sys.stderr,
-                  flush=True)  # fmt: skip
-            finishing.join()
-        self._uploads.cleanup()
-
-    async def _shutdown(self) -> None:
-        await self._runner.cleanup()
-        current = asyncio.current_task()
-        left = [task for task in asyncio.all_tasks() if task is not current]
-        for task in left:
-            task.cancel()
-        await asyncio.gather(*left, return_exceptions=True)
-
-    def wait(self) -> None:
-        """Serve until interrupted (Ctrl-C, or SIGTERM under ``rig``)."""
-        self._stopped.wait()
-
-
-def exposure_warning(host: str, port: int) -> str | None:
-    """What to say when serving on ``host`` reaches beyond this machine; None for loopback.
-
-    The viewer has no login: a page of the field, and uploads into this machine, for anyone
-    who can reach the port. The warning says how to view from elsewhere without that.
-    """
-    try:
-        address = ipaddress.ip_address(host.strip("[]"))
-    except ValueError:
-        if host.lower() in ("localhost", "localhost.localdomain"):
-            return None
-        every = host in ("", "*")
-    else:
-        if address.is_loopback:
-            return None
-        every = address.is_unspecified
-    reach = "every network this machine is on" if every else f"the network of {host}"
-    return (
-        f"serving on {host or '*'}:{port} answers {reach}, and the viewer has no login: "
-        "anyone who can reach it sees the field and can send this machine files. To view "
-        "from another machine, serve on 127.0.0.1 (the default) and tunnel instead: run "
-        f"`ssh -N -L {port}:127.0.0.1:{port} USER@THIS-MACHINE` there and open "
-        f"http://127.0.0.1:{port}/"
-    )
-
-
-def start_viewer(
-    session: LiveSession | PendingSession, *, host: str = "127.0.0.1", port: int = 0
-) -> ViewerServer:
-    """Serve the viewer on ``host``:``port`` (0: a free port) from a background thread.
-
-    Beyond this machine (``--host 0.0.0.0``) a warning on stderr says what that exposes and
-    how to tunnel instead (:func:`exposure_warning`).
-    """
-    uploads = tempfile.TemporaryDirectory(prefix="rig-view-")
-    loop = asyncio.new_event_loop()
-    runner = web.AppRunner(
-        build_app(session, Path(uploads.name)), access_log=None, shutdown_timeout=STOP_GRACE_S
-    )
-    try:
-        loop.run_until_complete(runner.setup())
-        loop.run_until_complete(web.TCPSite(runner, host, port).start())
-    except BaseException as error:
-        loop.run_until_complete(runner.cleanup())
-        loop.close()
-        uploads.cleanup()
-        if isinstance(error, OSError):
-            reason = error.strerror or error
-            raise InputError(f"cannot serve on {host}:{port}: {reason}") from None
-        raise
-    bound = runner.addresses[0]
-    shown = f"[{bound[0]}]" if ":" in str(bound[0]) else bound[0]
-    warning = exposure_warning(host, int(bound[1]))
-    if warning is not None:
-        print(f"warning: {warning}", file=sys.stderr, flush=True)
-    stopped = threading.Event()
-
-    def serve() -> None:
-        try:
-            loop.run_forever()
-        finally:
-            stopped.set()
-
-    thread = threading.Thread(target=serve, name="rig-view", daemon=True)
-    thread.start()
-    return ViewerServer(f"http://{shown}:{bound[1]}/", loop, runner, thread, uploads, stopped)

@@ -105,7 +105,8 @@ def open_session(
 def _run_view(args: argparse.Namespace) -> int:
     from functools import partial
 
-    from app.live_server import PendingSession, start_viewer
+    from app.live_server import PendingSession
+    from app.viewer_server import start_viewer
     from processing.rti import open_field_or_rti
 
     with open_field_or_rti(

@@ -23,7 +23,8 @@ import pytest
 from app import light_view, live_server
 from app.cli import main
 from app.cli.view import open_session
-from app.live_server import PendingSession, ViewerServer, start_viewer
+from app.live_server import PendingSession
+from app.viewer_server import ViewerServer, start_viewer
 from core.camera_model import PinholeCamera, camera_to_rig, rig_to_camera
 from core.colour import luminance
 from core.directions import hemisphere_layout

@@ -28,7 +28,7 @@ import pytest
 
 from app.cli import main
 from app.cli.view import open_session
-from app.live_server import ViewerServer, exposure_warning, start_viewer
+from app.viewer_server import ViewerServer, exposure_warning, start_viewer
 from core.camera_model import PinholeCamera, camera_to_rig
 from core.colour import luminance
 from core.directions import hemisphere_layout
