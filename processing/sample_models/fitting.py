@@ -11,6 +11,7 @@ per-sample arrays a fit fills are named by :class:`processing.sample_models.layo
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -19,11 +20,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.camera_model import rig_to_camera
-from core.errors import DatasetError, InputError
+from core.errors import DatasetError, InputError, NotApplicable
 from core.field_store import ReflectanceField, is_field_store
 from core.light_set import check_measured_lights
 from core.memory_budget import default_memory_budget, format_size
 from core.progress import progress_bar
+from processing.interpolation import mean_spacing_deg
 from processing.sample_models.bases import evaluate_basis, fit_basis
 from processing.sample_models.fit_kernel import fit_samples
 from processing.sample_models.fits import (
@@ -41,14 +43,21 @@ from processing.sample_models.stereo import check_stereo_lights, photometric_ste
 __all__ = [
     "ALPHA_RANGE",
     "FIT_BLOCK_BYTES",
+    "LOBE_SPACING",
     "budget_for",
     "fit_blocks",
     "fit_sample_models",
+    "lobe_alpha_range",
     "sample_block_size",
 ]
 
 #: GGX roughness searched (a lobe narrower than 0.02 is a mirror no rig samples).
 ALPHA_RANGE = (0.02, 1.0)
+#: A one-view field fits no lobe narrower than this fraction of its lights' mean spacing
+#: (radians; :func:`lobe_alpha_range`). GGX's full width at half maximum in half vectors is
+#: 1.29 alpha (small alpha) and one view's half vectors are about s / 2 apart for lights s
+#: apart: a lobe with alpha < 0.39 s falls between them (measured: the package's docstring).
+LOBE_SPACING = 0.4
 #: Log-spaced alpha grid nodes, then golden-section steps between the best node's neighbours.
 ALPHA_GRID = 16
 GOLDEN_STEPS = 14
@@ -70,7 +79,7 @@ def fit_sample_models(
     field: ReflectanceField,
     models: Sequence[str] | None = None,
     *,
-    alpha_range: tuple[float, float] = ALPHA_RANGE,
+    alpha_range: tuple[float, float] | None = None,
     shadow_ratio: float = SHADOW_RATIO,
     refine_normals: bool | None = None,
     memory_bytes: int | None = None,
@@ -87,7 +96,9 @@ def fit_sample_models(
         read from saved fits and settings, checked here); default ``lambert`` and
         ``lambert+ggx`` for points, every model for pixels. Basis models apply to pixel fields
         only.
-    alpha_range : (low, high), GGX roughness searched
+    alpha_range : (low, high), optional, GGX roughness searched; default
+        :func:`lobe_alpha_range` of the field's lights (a one-view field's lights cannot
+        resolve a lobe much narrower than their spacing)
     shadow_ratio : float in (0, 1), see :mod:`processing.sample_models` (Shadows)
     refine_normals : bool, optional
         Move each normal to the parametric model's optimum (pattern search). Default: on for
@@ -114,7 +125,9 @@ def fit_sample_models(
     Raises
     ------
     InputError
-        An unknown model, a basis model for a point field, bad ranges, too few lights.
+        An unknown model, a basis model for a point field, bad ranges.
+    NotApplicable
+        Too few lights: for a basis model's terms, photometric stereo, or any fit.
     DatasetError
         A point field without normals; lights no fit can use
         (:func:`core.light_set.check_measured_lights`).
@@ -137,7 +150,7 @@ def fit_blocks(
     field: ReflectanceField,
     models: Sequence[str] | None = None,
     *,
-    alpha_range: tuple[float, float] = ALPHA_RANGE,
+    alpha_range: tuple[float, float] | None = None,
     shadow_ratio: float = SHADOW_RATIO,
     refine_normals: bool | None = None,
     memory_bytes: int | None = None,
@@ -166,19 +179,21 @@ def fit_blocks(
         )
     if not 0.0 < shadow_ratio < 1.0:
         raise InputError(f"shadow ratio must be in (0, 1), got {shadow_ratio}")
-    grid = _alpha_grid(alpha_range)
     if field.shape[1] < 2:
-        raise InputError(f"{field.path}: fitting needs at least 2 lights, the field has 1")
+        raise NotApplicable(f"{field.path}: fitting needs at least 2 lights, the field has 1")
     lights = np.ascontiguousarray(field.light_directions, dtype=np.float64)
     frame, view, eyes, points = _viewing(field)
     pixels = field.sample_kind == "pixels"
     # pinv would fit degenerate lights without a word (and a choice run minutes on them).
     check_measured_lights(field.path, lights, blocked_below=field.below_horizon == "blocked")
+    if alpha_range is None:
+        alpha_range = lobe_alpha_range(lights, one_view=pixels)
+    grid = _alpha_grid(alpha_range)
     camera_lights = lights @ frame.T
     terms = {name: evaluate_basis(name, camera_lights[:1]).shape[1] for name in BASIS_MODELS}
     for name in names:
         if name in BASIS_MODELS and field.shape[1] <= terms[name]:
-            raise InputError(
+            raise NotApplicable(
                 f"model {name!r} has {terms[name]} terms; it needs more than that many lights, "
                 f"the field has {field.shape[1]}"
             )
@@ -282,6 +297,26 @@ def _alpha_grid(alpha_range: tuple[float, float]) -> NDArray[np.float64]:
     if not 0.0 < low < high <= 1.0:
         raise InputError(f"alpha range must satisfy 0 < low < high <= 1, got {alpha_range}")
     return np.geomspace(low, high, ALPHA_GRID)
+
+
+def lobe_alpha_range(lights: NDArray[np.floating], *, one_view: bool) -> tuple[float, float]:
+    """The GGX roughness range a field's lights resolve: the default ``alpha_range`` of a fit.
+
+    Parameters
+    ----------
+    lights : ndarray, shape (T, 3), unit light directions, T >= 2
+    one_view : bool, a field of pixels (one camera) rather than of points seen by several
+
+    Returns
+    -------
+    (low, high) : ``ALPHA_RANGE`` for a field of points; for one view the low end is at least
+        ``LOBE_SPACING`` times the lights' mean spacing (radians), and at most half of high.
+    """
+    low, high = ALPHA_RANGE
+    if one_view and len(lights) > 1:
+        spacing = math.radians(mean_spacing_deg(lights))
+        low = min(max(low, LOBE_SPACING * spacing), high / 2)
+    return low, high
 
 
 def _viewing(
