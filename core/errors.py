@@ -16,6 +16,13 @@ class InputError(RigError, ValueError):
     """A value, argument or file given by the user is not acceptable."""
 
 
+class NotApplicable(InputError):
+    """A method cannot be applied to this field: too few lights for its terms, or a part it needs.
+
+    A choice among methods leaves such a candidate out and says why; any other error stops it.
+    """
+
+
 class PanoramaError(InputError):
     """A panorama file cannot be used as an environment (unreadable, wrong shape, bad values)."""
 

@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from core.errors import InputError
+from core.errors import InputError, NotApplicable
 from processing.learned_rti import (
     CODE_SIZE,
     DECODER_LAYERS,
@@ -178,23 +178,24 @@ def train_learned_rti(
     Raises
     ------
     InputError
-        Shapes that do not match, fewer than two lights, no bright value, PyTorch missing, or
-        a CUDA device asked for and not present.
+        Shapes that do not match, or a CUDA device asked for and not present.
+    NotApplicable
+        Fewer than two lights, no bright value, or PyTorch missing.
     """
     directions = np.asarray(lights, dtype=np.float32)
-    if directions.ndim != 2 or directions.shape[1] != 3 or len(directions) < 2:
-        raise InputError(
-            f"learned model: lights must have shape (T >= 2, 3), got {directions.shape}"
-        )
+    if directions.ndim != 2 or directions.shape[1] != 3:
+        raise InputError(f"learned model: lights must have shape (T, 3), got {directions.shape}")
+    if len(directions) < 2:
+        raise NotApplicable(f"learned model: it needs at least 2 lights, got {len(directions)}")
     v = _checked_values(values, len(directions))
     finite = v[np.isfinite(v)]
     scale = float(np.percentile(finite, SCALE_PERCENTILE)) if finite.size else 0.0
     if not scale > 0:
-        raise InputError("learned model: every measured value is zero; nothing to learn")
+        raise NotApplicable("learned model: every measured value is zero; nothing to learn")
     try:
         import torch
     except ImportError as exc:  # the `learned` extra
-        raise InputError(
+        raise NotApplicable(
             "the learned model needs PyTorch: pip install -e '.[learned]' (make test does)"
         ) from exc
     device = training_device(settings.device)

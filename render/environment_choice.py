@@ -45,7 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.directions import angle_between
-from core.errors import InputError
+from core.errors import InputError, NotApplicable
 from core.field_store import ReflectanceField
 from core.light_set import grid_lights
 from core.progress import progress_bar
@@ -236,7 +236,9 @@ def choose_environment_mode(
     Raises
     ------
     InputError
-        A field of points, or a field too small to split (fewer than six lights).
+        A field of points, or a field too small to split (fewer than six lights). A candidate
+        that does not apply (:class:`core.errors.NotApplicable`) is left out with its reason;
+        any other error of a candidate stops the choice.
     """
     if field.image_shape is None:
         raise InputError(f"{field.path}: the environment choice is made for fields of pixels")
@@ -274,7 +276,7 @@ def choose_environment_mode(
                             )
                         excess = max(error**2 - inside[name] ** 2, 0.0) * ratio**GAP_EXPONENT
                         errors[name].append(weight * math.sqrt(inside[name] ** 2 + excess))
-                    except InputError as problem:  # a basis with more terms than the lights
+                    except NotApplicable as problem:  # a basis with more terms than the lights
                         notes[name] = str(problem)
                 seconds[name] += time.perf_counter() - start
                 bar.update()

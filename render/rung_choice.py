@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from core.colour import linear_to_srgb
 from core.directions import angle_between
-from core.errors import InputError
+from core.errors import InputError, NotApplicable
 from core.field_store import ReflectanceField
 from core.progress import progress_bar
 from processing.image_quality import display_scale
@@ -229,7 +229,10 @@ def choose_light_rung(
     Raises
     ------
     InputError
-        A field too small to split, or no candidate that applies.
+        A field too small to split, or no candidate that applies. A candidate that does not
+        apply (:class:`core.errors.NotApplicable`: a basis with more terms than a fold's
+        lights) is left out with its reason; any other error of a candidate (its fit cannot
+        be saved, say) stops the choice.
     """
     names = list(candidates or (*LIGHT_CANDIDATES, *(() if fast else SLOW_CANDIDATES)))
     folds = light_folds(field, queries)
@@ -254,7 +257,7 @@ def choose_light_rung(
                 at_measured = predictor.predict(0, field.light_directions)[:, seen]
                 trials[name] = _Trial(predictor, _mse(at_measured, measured, scale), [],
                                       at_measured if keep else None, [])  # fmt: skip
-            except InputError as error:  # a basis with more terms than the lights
+            except NotApplicable as error:  # a basis with more terms than the lights
                 notes[name] = str(error)
             seconds[name] += time.perf_counter() - start
             bar.update()
@@ -269,7 +272,7 @@ def choose_light_rung(
                     predicted = make_predictor(part, name, learned=learned).predict(
                         0, field.light_directions[test]
                     )[:, seen]
-                except InputError as error:  # a basis with more terms than a fold's lights
+                except NotApplicable as error:  # a basis with more terms than a fold's lights
                     notes[name] = str(error)
                     del trials[name]
                 else:

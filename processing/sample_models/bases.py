@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import factorial, lpmv
 
-from core.errors import InputError
+from core.errors import InputError, NotApplicable
 from processing.sample_models.fits import BASIS_MODELS, BasisFit, BasisModelName
 from processing.sample_models.loo import LooError
 
@@ -103,13 +103,13 @@ def fit_basis(
 
     Raises
     ------
-    InputError
+    NotApplicable
         The model has as many terms as the field has lights, or more.
     """
     t_count, p_count, _ = values.shape
     design = evaluate_basis(name, camera_lights)
     if t_count <= design.shape[1]:
-        raise InputError(
+        raise NotApplicable(
             f"model {name!r} has {design.shape[1]} terms; it needs more than that many lights, "
             f"the field has {t_count}"
         )

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from core.errors import InputError
+from core.errors import NotApplicable
 from core.field_store import ReflectanceField
 from processing.interpolation import InterpolationMethod, interpolation_weights
 
@@ -76,7 +76,7 @@ def leave_one_out_weights(
     lights = np.asarray(light_directions, dtype=np.float64)
     t_count = lights.shape[0]
     if t_count < 2:
-        raise InputError(f"leaving one light out needs at least 2 lights, got {t_count}")
+        raise NotApplicable(f"leaving one light out needs at least 2 lights, got {t_count}")
     rows_i, rows_w = [], []
     for t in range(t_count):
         others = np.delete(np.arange(t_count), t)

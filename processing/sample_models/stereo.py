@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.colour import REC709_LUMINANCE
-from core.errors import InputError
+from core.errors import InputError, NotApplicable
 
 __all__ = ["STEREO_CHUNK", "check_stereo_lights", "photometric_stereo"]
 
@@ -27,13 +27,15 @@ def check_stereo_lights(
     Raises
     ------
     InputError
-        Fractions out of range, or fewer than 3 lights left between them.
+        Fractions out of range.
+    NotApplicable
+        Fewer than 3 lights left between them.
     """
     if not (0.0 <= dark < 1.0 and 0.0 <= bright < 1.0 and dark + bright < 1.0):
         raise InputError(f"photometric stereo fractions dark={dark}, bright={bright} are invalid")
     lo, hi = round(dark * t_count), t_count - round(bright * t_count)
     if hi - lo < 3:
-        raise InputError(
+        raise NotApplicable(
             f"photometric stereo needs at least 3 lights between the quantiles, got {hi - lo} "
             f"of {t_count}"
         )

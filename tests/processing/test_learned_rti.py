@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from core.directions import hemisphere_layout
-from core.errors import InputError
+from core.errors import InputError, NotApplicable
 from processing.learned_rti import CODE_SIZE, LearnedRTI, light_features
 from processing.learned_rti_training import TrainingSettings, _decoded, train_learned_rti
 from processing.network_training import numpy_layers, torch_mlp, validation_lights
@@ -223,6 +223,8 @@ def test_bad_inputs_are_named() -> None:
     with pytest.raises(InputError, match=r"values must have shape \(12, N, 3\)"):
         train_learned_rti(np.zeros((11, 5, 3)), lights)
     with pytest.raises(InputError, match="lights must have shape"):
+        train_learned_rti(np.zeros((12, 5, 3)), lights[:, :2])
+    with pytest.raises(NotApplicable, match="needs at least 2 lights, got 1"):
         train_learned_rti(np.zeros((1, 5, 3)), lights[:1])
     with pytest.raises(InputError, match="every measured value is zero"):
         train_learned_rti(np.zeros((12, 5, 3)), lights)

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,7 @@ from render.environment_choice import (
     held_out_splits,
 )
 from sim.rti_capture import write_rti_capture
+from tests.full_disk import run_limited
 
 ALBEDO = 0.6
 
@@ -173,3 +175,40 @@ def test_a_sun_is_predicted_and_its_sky_is_summed(plane: ReflectanceField) -> No
     # On a Lambertian plane the model predicts a light between the measured ones exactly.
     assert choice.mode == PredictorRelightSettings("lambert+ggx+residual", split=True)
     assert "the rest" in choice.reason and f"{choice.sharp_share:.0%}" in choice.reason
+
+
+_CHOOSE = """
+import sys
+import numpy as np
+from core.errors import InputError
+from core.field_store import ReflectanceField
+from processing.panorama import panorama_from_array
+from render.environment_choice import choose_environment_mode
+rgb = np.full((32, 64, 3), 0.05, dtype=np.float32)
+rgb[9, 21] = 4000.0
+field = ReflectanceField.open(sys.argv[1])
+try:
+    choice = choose_environment_mode(field, panorama_from_array(rgb), candidates=sys.argv[2:])
+except InputError as error:
+    print("stopped:", error)
+else:
+    print("chose:", [(s.name, s.note) for s in choice.scores])
+"""
+
+
+def test_a_fit_that_cannot_be_saved_stops_the_environment_choice(tmp_path: Path) -> None:
+    # The model's fit at every measured light is saved beside the store; on a full disk (a
+    # real file size limit, in a child: tests/full_disk.py) it fails, and the choice says so
+    # instead of leaving the model out as if it did not apply.
+    store = import_rti(_lambertian_capture(tmp_path / "capture"), tmp_path / "field.zarr").path
+    argv = [sys.executable, "-c", _CHOOSE, str(store), LIGHT_STAGE, "lambert+ggx+residual"]
+    done = run_limited(argv, limit=1 << 30)  # compiles and caches the kernels (files too)
+    assert done.stdout.startswith("chose: "), done.stdout + done.stderr
+    saved = sorted(tmp_path.glob("field.zarr.models*"))
+    assert saved, sorted(tmp_path.iterdir())
+    for path in saved:
+        path.unlink()
+    done = run_limited(argv, limit=4_000)
+    assert done.stdout.startswith("stopped: "), done.stdout + done.stderr
+    assert "cannot write" in done.stdout
+    assert not list(tmp_path.glob("field.zarr.models*"))

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ from render.rung_choice import (
     light_folds,
 )
 from sim.rti_capture import write_rti_capture
+from tests.full_disk import run_limited
 
 LIGHTS = hemisphere_layout(36, "fibonacci")
 
@@ -103,3 +105,40 @@ def test_a_basis_that_cannot_apply_is_said_and_skipped(tmp_path: Path) -> None:
     hsh = next(s for s in choice.scores if s.name == "hsh3")
     assert hsh.psnr == -np.inf and "terms" in hsh.note
     assert choice.name == "barycentric"
+
+
+_CHOOSE = """
+import sys
+from core.errors import InputError
+from core.field_store import ReflectanceField
+from render.rung_choice import choose_light_rung
+field = ReflectanceField.open(sys.argv[1])
+try:
+    choice = choose_light_rung(field, candidates=sys.argv[2:], mix=False)
+except InputError as error:
+    print("stopped:", error)
+else:
+    print("chose:", choice.name, [(s.name, s.note) for s in choice.scores])
+"""
+
+
+def test_a_fit_that_cannot_be_saved_stops_the_choice(tmp_path: Path) -> None:
+    # The model's fit is saved beside the store; on a full disk (a real file size limit, in a
+    # child: tests/full_disk.py) that save fails. The choice had taken its error for "does not
+    # apply", left the model out and chosen another rung without a word.
+    store = _two_materials(tmp_path).path
+    candidates = ["barycentric", "lambert+ggx+residual"]
+    # With room on the disk the choice runs (and its kernels are compiled and cached: numba
+    # writes its cache files too).
+    done = run_limited([sys.executable, "-c", _CHOOSE, str(store), *candidates], limit=1 << 30)
+    assert done.stdout.startswith("chose: "), done.stdout + done.stderr
+    before = set(tmp_path.iterdir())
+    saved = [path for path in before if path.name.startswith("field.zarr.models")]
+    assert saved, before
+    for path in saved:
+        path.unlink()
+    done = run_limited([sys.executable, "-c", _CHOOSE, str(store), *candidates], limit=4_000)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("stopped: "), done.stdout
+    assert "cannot write" in done.stdout
+    assert set(tmp_path.iterdir()) == before - set(saved)  # nothing half-written left
