@@ -33,6 +33,7 @@ triangulation and the clamp are :mod:`processing.measured_region`.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any, Literal, get_args
@@ -250,6 +251,17 @@ def _unit_rows(
 
 def _measured(measured: ArrayLike) -> tuple[FloatArray, Any]:
     points = _unit_rows(measured, "measured", "measured", "N", allow_empty=False)
+    return _measured_tree(points.tobytes(), len(points))
+
+
+@functools.lru_cache(maxsize=64)
+def _measured_tree(data: bytes, count: int) -> tuple[FloatArray, Any]:
+    """The unit directions held in ``data`` (read-only) and their tree, duplicates refused.
+
+    Kept for the next call: a fit and the rung choices ask for one light set's weights
+    thousands of times (per predicted light, per held-out light).
+    """
+    points = np.frombuffer(data, dtype=np.float64).reshape(count, 3)
     tree = cKDTree(points)
     if len(points) > 1:
         chord, other = tree.query(points, k=2)
