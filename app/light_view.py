@@ -255,8 +255,12 @@ class ChosenLight:
                     check()
                 self.status = what if event.finished else f"{what}: {event}"
 
-            with reporting_to(count):
-                choice = choose_light_rung(field, fast=True)
+            try:
+                with reporting_to(count):
+                    choice = choose_light_rung(field, fast=True)
+            except RigError as error:  # a fit that cannot be saved, say: the next light retries
+                self.status = f"could not choose the method: {error}"
+                raise
             self.method = choice.describe()
             self.status = f"fitting {self.method} on every light"
             self._predictor = choice.predictor(field)

@@ -9,6 +9,7 @@ Screenshots are kept in ``test-artifacts/light-view/``.
 from __future__ import annotations
 
 import json
+import sys
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
@@ -32,6 +33,7 @@ from core.field_store import FieldStoreWriter, ReflectanceField
 from core.sample_data import panorama_path, rti_capture_path
 from processing.rti import import_rti
 from tests.app.test_viewer import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS
+from tests.full_disk import run_limited
 
 FOLDER = ARTIFACTS / "light-view"
 #: WebGL2 without a GPU: Chromium's software rasteriser.
@@ -337,3 +339,31 @@ def test_a_large_capture_opens_its_panorama_session_on_request(
         page.close()
     finally:
         _off_the_loop(server.stop)
+
+
+_PICTURE = """
+import sys
+from app.light_view import ChosenLight
+from core.errors import InputError
+from core.field_store import ReflectanceField
+chosen = ChosenLight(ReflectanceField.open(sys.argv[1]))
+try:
+    chosen.picture((0.0, 0.0, 1.0))
+except InputError as error:
+    print("failed:", error)
+print("status:", chosen.status)
+"""
+
+
+def test_a_method_that_cannot_be_chosen_says_why_in_the_status(tmp_path: Path) -> None:
+    # The choice saves the models' fit beside the store; on a full disk (a real file size
+    # limit, in a child) it fails, and the page's status says so rather than "choosing".
+    store = _sphere_field(tmp_path / "sphere.zarr", size=16).path
+    argv = [sys.executable, "-c", _PICTURE, str(store)]
+    done = run_limited(argv, limit=1 << 30)  # compiles and caches the kernels (files too)
+    assert "status: ready" in done.stdout, done.stdout + done.stderr
+    for path in tmp_path.glob("sphere.zarr.models*"):
+        path.unlink()
+    done = run_limited(argv, limit=4_000)
+    assert "failed: " in done.stdout and "cannot write" in done.stdout, done.stdout + done.stderr
+    assert "status: could not choose the method: " in done.stdout
