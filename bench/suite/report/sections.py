@@ -158,7 +158,7 @@ def _section_stability(results: SuiteResults) -> list[str]:
         "## Where methods fail (the stability study)",
         "",
         "Each failure case of `bench/stability.py` in a failing and a benign configuration, "
-        "with the warnings `rig relight` prints for it (`render/guards.py`).",
+        "with the warnings `rig relight` prints for it (`render/guards/`).",
         "",
         format_stability(results["stability"]).rstrip("\n"),
         "",
