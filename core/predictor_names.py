@@ -27,6 +27,7 @@ PredictorName = Literal[
     "lambert+residual",
     "lambert+ggx+residual",
     "adaptive",
+    "relief",
     "learned",
     "learned+residual",
     "light-stage+lambert+ggx",

@@ -29,6 +29,10 @@ method                      what predicts the unmeasured light
                             share of the error): where the model explains a sample its
                             residual helps, where it does not (cast shadows, grazing light)
                             plain interpolation is kept
+``relief``                  ``lambert+ggx+residual`` whose cast shadows between measured
+                            lights come from a height field fitted to the measured shadows
+                            (:mod:`processing.relief_shadows`) where the lights around
+                            disagree, instead of a fraction of each: pixel fields
 ``light-stage+lambert+ggx``  the model plus its residual at the nearest measured light:
                             under an environment, the light-stage sum corrected by the model
 ``learned``,                a code per sample and one small decoder shared by the object,
@@ -70,6 +74,7 @@ from render.prediction_methods import (
     _Interpolating,
     _Learned,
     _Model,
+    _Relief,
     _Residual,
 )
 from render.rti_fits import choose_rbf_sigma, sigma_subset
@@ -256,9 +261,11 @@ def make_predictor(
         model = name.removeprefix("light-stage+")
         fitted = _fitted_models(field, [model], models)
         return _Residual(field, name, _Model(field, model, fitted), interpolation="nearest")
-    model = "lambert+ggx" if name == "adaptive" else name.removesuffix("+residual")
+    model = "lambert+ggx" if name in ("adaptive", "relief") else name.removesuffix("+residual")
     fitted = _fitted_models(field, [model], models)
     base = _Model(field, model, fitted)
     if name == "adaptive":
         return _Adaptive(field, name, _Residual(field, "lambert+ggx+residual", base))
+    if name == "relief":
+        return _Relief(field, name, _Residual(field, "lambert+ggx+residual", base))
     return _Residual(field, name, base) if name.endswith("+residual") else base

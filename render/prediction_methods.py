@@ -5,7 +5,8 @@ here are their predictors: the interpolations of the measured images (nearest, b
 the RTI tools' rbf of :mod:`render.rti_fits`), the linear bases (PTM, HSH, in linear light or
 fitted to 8-bit values), the per-sample models, a model plus the interpolation of its residual
 (or the light-stage sum plus the model's correction), the adaptive mix of barycentric and
-model + residual, the learned model, and a per-pixel mixture of any of them.
+model + residual, the model + residual with a relief's cast shadows, the learned model, and a
+per-pixel mixture of any of them.
 
 Fitted predictions are bounded by what the data allow: at least 0 and at most
 :func:`bound_factor` times the sample's brightest measured value (per channel). A lobe
@@ -26,7 +27,7 @@ lights are the rig's upper hemisphere, where the hemispherical harmonics are def
 from __future__ import annotations
 
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from dataclasses import field as default
 from typing import Protocol
 
@@ -35,14 +36,21 @@ from numpy.typing import NDArray
 
 from core.camera_model import rig_to_camera
 from core.colour import srgb_to_linear
-from core.errors import InputError
+from core.errors import InputError, NotApplicable
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
 from core.progress import progress_bar
 from processing.interpolation import InterpolationMethod, interpolation_weights, mean_spacing_deg
 from processing.learned_rti import LearnedRTI
 from processing.learned_rti_training import TrainingSettings, train_learned_rti
-from processing.sample_models import SampleModels, choose_model, evaluate_basis
+from processing.relief_shadows import (
+    FIT_STEPS,
+    TRUSTED_DISAGREEMENT,
+    relief_disagreement,
+    relief_heights,
+    relief_visibility,
+)
+from processing.sample_models import ParametricFit, SampleModels, choose_model, evaluate_basis
 from processing.sample_models.bases import fit_basis
 from render.engines.model_shading import prepare_lighting, relight_models
 from render.rti_fits import fit_basis_8bit, rbf_weights
@@ -204,6 +212,77 @@ class _Residual:
         weights = interpolation_weights(measured, directions, self.interpolation, policy="clamp")
         correction = weights.apply(self._residual_of(camera))
         return _bounded(self.field, camera, self.base.predict(camera, directions) + correction)
+
+
+#: Interpolated marks strictly between these: the measured lights around disagree, and the
+#: relief's shadow decides (where they agree, the shadow is where they put it).
+_UNANIMOUS = (0.02, 0.98)
+
+
+@dataclass
+class _Relief:
+    """``lambert+ggx+residual`` whose cast shadows between lights come from a fitted relief.
+
+    Where the measured lights around a requested one disagree on a pixel's shadow, the
+    barycentric marks would give it a fraction of each; the heights of
+    :func:`processing.relief_shadows.relief_heights`, fitted to every measured mark, say
+    where the shadow moved instead, on the pixels whose measured marks they reproduce
+    (:data:`processing.relief_shadows.TRUSTED_DISAGREEMENT`). Pixel fields (one view) only.
+    """
+
+    field: ReflectanceField
+    name: str
+    residual: _Residual
+    _heights: dict[int, NDArray[np.float32]] = default(default_factory=dict)
+    _trusted: dict[int, NDArray[np.bool_]] = default(default_factory=dict)
+
+    def _fit(self) -> tuple[ParametricFit, NDArray[np.float64]]:
+        model = self.residual.base
+        assert isinstance(model, _Model)
+        fit = model.models.fit(model.name)
+        assert isinstance(fit, ParametricFit)
+        return fit, model.models.camera_frame
+
+    def heights(self, camera: int) -> NDArray[np.float32]:
+        """The relief (H, W) fitted to ``camera``'s shadow marks, pixel units."""
+        if camera not in self._heights:
+            shape = self.field.image_shape
+            if shape is None or self.field.shape[0] != 1:
+                raise NotApplicable("relief shadows need a field of pixels seen by one camera")
+            fit, frame = self._fit()
+            count = len(self.field.light_directions)
+            visible = self.field.visibility[camera].reshape(shape)
+            marks, normals = fit.lit[:, :count], fit.normals @ frame.T
+            lights = self.field.light_directions @ frame.T
+            with progress_bar(total=FIT_STEPS, desc="relief", unit="step") as bar:
+                heights = relief_heights(
+                    marks, normals, lights, visible, progress=lambda step, _: bar.update()
+                )
+            disagreement = relief_disagreement(heights, marks, normals, lights, visible)
+            self._heights[camera] = heights
+            self._trusted[camera] = disagreement <= TRUSTED_DISAGREEMENT
+        return self._heights[camera]
+
+    def predict(self, camera: int, directions: NDArray[np.floating]) -> NDArray[np.float32]:
+        heights = self.heights(camera)
+        fit, frame = self._fit()
+        measured = self.field.light_directions
+        d = np.asarray(directions, dtype=np.float64)
+        weights = interpolation_weights(measured, d, "barycentric", policy="clamp")
+        marks = weights.apply(fit.lit[:, : len(measured)].T.astype(np.float32)).T
+        shape = self.field.image_shape
+        assert shape is not None
+        cast = relief_visibility(heights, d @ frame.T, self.field.visibility[camera].reshape(shape))
+        torn = (marks > _UNANIMOUS[0]) & (marks < _UNANIMOUS[1]) & self._trusted[camera][:, None]
+        visibility = np.where(torn, cast, marks)
+        model = self.residual.base
+        assert isinstance(model, _Model)
+        unshadowed = _Model(
+            self.field, model.name,
+            replace(model.models, fits={model.name: replace(fit, lit=np.ones_like(fit.lit))}),
+        ).predict(camera, d)  # fmt: skip
+        correction = weights.apply(self.residual._residual_of(camera))
+        return _bounded(self.field, camera, unshadowed * visibility.T[:, :, None] + correction)
 
 
 def leave_one_out_barycentric(

@@ -72,8 +72,8 @@ LIGHT_CANDIDATES = (
     "lambert+ggx+residual",
     "adaptive",
 )
-#: Candidates that train a network: left out by ``fast``.
-SLOW_CANDIDATES = ("learned+residual",)
+#: Candidates fitted by gradient descent (a relief's heights, a network): left out by ``fast``.
+SLOW_CANDIDATES = ("relief", "learned+residual")
 #: Members of a mixture: the best candidates by score.
 MIXED = 3
 #: Gaussian width (pixels) the per-pixel errors are smoothed with before they weight.
@@ -220,7 +220,7 @@ def choose_light_rung(
     field : ReflectanceField (camera 0 is scored: a field of pixels' one view)
     queries : ndarray (Q, 3), optional, the lights to predict (rig frame; see
         :func:`light_folds` and :class:`UseGaps`)
-    fast : bool, leave out the candidates that train a network
+    fast : bool, leave out the candidates fitted by gradient descent (a relief, a network)
     candidates : names, optional (default :data:`LIGHT_CANDIDATES`, then
         :data:`SLOW_CANDIDATES` unless ``fast``)
     mix : bool, also try the per-pixel mixture (fields of pixels)

@@ -11,6 +11,7 @@ from core.errors import InputError
 from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.interpolation import interpolation_weights
 from processing.learned_rti_training import TrainingSettings
+from processing.relief_shadows import relief_visibility
 from processing.sample_models import evaluate_basis
 from render.light_prediction import PREDICTORS, make_predictor
 from render.prediction_methods import (
@@ -27,18 +28,20 @@ HEIGHT, WIDTH = 4, 6
 BRIEF = TrainingSettings(steps=10, batch=8, lights_per_step=4)
 
 
-def _pixel_field(path: Path, values_of: object, lights: int = 40) -> ReflectanceField:
+def _pixel_field(
+    path: Path, values_of: object, lights: int = 40, shape: tuple[int, int] = (HEIGHT, WIDTH)
+) -> ReflectanceField:
     """A field of pixels whose radiance is ``values_of(camera-frame directions)`` (T, P, 3)."""
-    camera = PinholeCamera(0.0, 0.0, 10.0, 10.0, WIDTH, HEIGHT)
+    camera = PinholeCamera(0.0, 0.0, 10.0, 10.0, shape[1], shape[0])
     directions = hemisphere_layout(lights, "fibonacci")
     values = values_of(directions)  # type: ignore[operator]
     writer = FieldStoreWriter(
         path, points=None, normals=None, light_directions=camera_to_rig(directions, camera),
-        cameras=[camera], image_shape=(HEIGHT, WIDTH),
+        cameras=[camera], image_shape=shape,
     )  # fmt: skip
     for t in range(lights):
         writer.write_slab(0, t, values[t].astype(np.float32))
-    writer.write_visibility(0, np.ones(HEIGHT * WIDTH, dtype=bool))
+    writer.write_visibility(0, np.ones(shape[0] * shape[1], dtype=bool))
     writer.finish()
     return ReflectanceField.open(path)
 
@@ -142,6 +145,35 @@ def test_every_method_has_a_predictor_and_unknown_ones_are_refused(tmp_path: Pat
         assert predictor.predict(0, direction).shape == (1, HEIGHT * WIDTH, 3)
     with pytest.raises(InputError, match="unknown method 'splines'"):
         make_predictor(field, "splines")
+
+
+def test_the_relief_rung_moves_cast_shadows_between_the_measured_lights(tmp_path: Path) -> None:
+    # A matte block on a matte base: at low lights between the measured ones the shadow has
+    # moved, and interpolated marks give two half shadows.
+    size = 40
+    heights = np.zeros((size, size))
+    heights[14:26, 14:26] = 5.0
+    visible = np.ones((size, size), dtype=bool)
+
+    def values(directions: np.ndarray) -> np.ndarray:
+        lit = relief_visibility(heights, directions, visible, spread=0).T
+        shade = 0.6 * np.clip(directions[:, 2], 0.0, None)[:, None] * lit
+        return np.repeat(shade[:, :, None], 3, axis=2)
+
+    field = _pixel_field(tmp_path / "f.zarr", values, lights=49, shape=(size, size))
+    elevation = np.radians(15.0)
+    azimuths = np.radians(np.arange(10.0, 360.0, 40.0))
+    new = np.stack(
+        [np.cos(elevation) * np.cos(azimuths), np.cos(elevation) * np.sin(azimuths),
+         np.full_like(azimuths, np.sin(elevation))], axis=1,
+    )  # fmt: skip
+    truth = values(new)
+    rig = camera_to_rig(new, field.cameras[0])
+    error = {
+        name: float(np.mean((make_predictor(field, name).predict(0, rig) - truth) ** 2))
+        for name in ("relief", "lambert+ggx+residual")
+    }
+    assert error["relief"] < 0.25 * error["lambert+ggx+residual"]
 
 
 def test_leave_one_out_barycentric_rebuilds_the_triangulation_without_the_light() -> None:
