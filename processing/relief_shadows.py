@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -48,7 +49,7 @@ __all__ = [
 RAY_OFFSETS = np.concatenate(
     [np.arange(1, 13), np.arange(14, 31, 2), np.arange(34, 71, 4), np.arange(78, 127, 8)]
 ).astype(np.float64)
-#: Gradient steps of the fit (about 0.15 s each for 9,000 pixels and 49 lights on 2 cores).
+#: Gradient steps of the fit (about 0.025 s each for 9,000 pixels and 49 lights on 2 cores).
 FIT_STEPS = 200
 #: Larger images are fitted at a coarser scale (heights scaled back up): the cost and the
 #: memory (4 bytes per pixel, light and ray offset) are per pixel.
@@ -62,7 +63,6 @@ TRUSTED_DISAGREEMENT = 0.1
 #: Lights whose direction is this close to the normal's plane (cosine) say nothing of shadows.
 GRAZING_COSINE = 0.05
 _LEARNING_RATE, _SMOOTHNESS = 0.3, 0.01
-_CHUNK = 8
 _SHARPNESS_START, _SHARPNESS_END = 0.3, 0.03
 
 
@@ -90,6 +90,30 @@ def _ray_pixels(
     inside = (c >= 0) & (c < shape[1]) & (r >= 0) & (r < shape[0])
     index = np.where(inside, r * shape[1] + c, 0)
     return np.where(inside & visible.ravel()[index], index, -1)
+
+
+@numba.njit(parallel=True, cache=True)
+def _highest_occluders(
+    height: NDArray[np.float32],
+    index: NDArray[np.int32],
+    pixels: NDArray[np.int64],
+    inverse: NDArray[np.float32],
+    occluder: NDArray[np.int64],
+    distance: NDArray[np.float32],
+) -> None:
+    # For each pixel and light, the point along the ray (index (P, T, K)) that rises fastest
+    # above the pixel, and its distance: numba, as the rises of every ray at once would be
+    # (P, T, K) floats a step.
+    for p in numba.prange(index.shape[0]):
+        own = height[pixels[p]]
+        for t in range(index.shape[1]):
+            best, at = -np.inf, 0
+            for k in range(index.shape[2]):
+                rise = (height[index[p, t, k]] - own) * inverse[k]
+                if rise > best:
+                    best, at = rise, k
+            occluder[p, t] = index[p, t, at]
+            distance[p, t] = 1.0 / inverse[at]
 
 
 def relief_heights(
@@ -157,8 +181,10 @@ def relief_heights(
     torch.set_num_threads(threads or idle_cores())
     rays = np.stack([_ray_pixels(shape, mask, pixels, ray[j], RAY_OFFSETS) for j in lights], axis=1)
     missing = mask.size  # an extra height, far below everything, for rays that leave
-    index = torch.from_numpy(np.where(rays >= 0, rays, missing).astype(np.int32))
-    inverse = torch.from_numpy(1.0 / RAY_OFFSETS).float()
+    index = np.ascontiguousarray(np.where(rays >= 0, rays, missing), dtype=np.int32)
+    inverse = (1.0 / RAY_OFFSETS).astype(np.float32)
+    occluder = np.zeros(index.shape[:2], dtype=np.int64)
+    distance = np.zeros(index.shape[:2], dtype=np.float32)
     slopes = torch.from_numpy(slope[lights]).float()
     goal = torch.from_numpy(target.astype(np.float32))
     # Shadows are rare: weigh them up (square root of the imbalance) so they are not ignored.
@@ -176,18 +202,12 @@ def relief_heights(
     )
     for step in range(steps):
         sharpness = max(_SHARPNESS_START * (1 - step / steps), _SHARPNESS_END)
-        with torch.no_grad():
-            # The highest rise along each ray; only its occluder carries the gradient. Lights
-            # in chunks: the rises of every ray at once would be (P, T, K) floats.
-            at = torch.cat([
-                ((height[index[:, j : j + _CHUNK]] - height[own][:, None, None]) * inverse)
-                .argmax(dim=2, keepdim=True)
-                for j in range(0, index.shape[1], _CHUNK)
-            ], dim=1)  # fmt: skip
-            occluder = torch.gather(index, 2, at).squeeze(2)
-            distance = 1.0 / inverse[at.squeeze(2)]
+        # The highest rise along each ray; only its occluder carries the gradient.
+        _highest_occluders(height.detach().numpy(), index, pixels, inverse, occluder, distance)
         optimiser.zero_grad()
-        horizon = (height[occluder] - height[own][:, None]) / distance
+        horizon = (height[torch.from_numpy(occluder)] - height[own][:, None]) / torch.from_numpy(
+            distance
+        )
         logit = (slopes[None, :] - horizon) / sharpness  # > 0: lit
         loss = (
             torch.nn.functional.binary_cross_entropy_with_logits(

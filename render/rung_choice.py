@@ -62,7 +62,7 @@ __all__ = [
 ]
 
 #: Quick candidates: the interpolations, the RTI tools' fits (on 8-bit values as they fit
-#: them, and in linear light), the models with their residual.
+#: them, and in linear light), the models with their residual, and with a relief's shadows.
 LIGHT_CANDIDATES = (
     "barycentric",
     "rbf",
@@ -71,9 +71,10 @@ LIGHT_CANDIDATES = (
     "hsh3",
     "lambert+ggx+residual",
     "adaptive",
+    "relief",
 )
-#: Candidates fitted by gradient descent (a relief's heights, a network): left out by ``fast``.
-SLOW_CANDIDATES = ("relief", "learned+residual")
+#: Candidates that train a network: left out by ``fast``.
+SLOW_CANDIDATES = ("learned+residual",)
 #: Members of a mixture: the best candidates by score.
 MIXED = 3
 #: Gaussian width (pixels) the per-pixel errors are smoothed with before they weight.
@@ -220,7 +221,7 @@ def choose_light_rung(
     field : ReflectanceField (camera 0 is scored: a field of pixels' one view)
     queries : ndarray (Q, 3), optional, the lights to predict (rig frame; see
         :func:`light_folds` and :class:`UseGaps`)
-    fast : bool, leave out the candidates fitted by gradient descent (a relief, a network)
+    fast : bool, leave out the candidates that train a network
     candidates : names, optional (default :data:`LIGHT_CANDIDATES`, then
         :data:`SLOW_CANDIDATES` unless ``fast``)
     mix : bool, also try the per-pixel mixture (fields of pixels)

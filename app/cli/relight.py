@@ -69,7 +69,7 @@ def add_relight(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -
                    "lamps, light below the lowest lights) for that; a NAME: the whole panorama "
                    "through that method)")  # fmt: skip
     p.add_argument("--fast", action="store_true", help="auto: choose among the quick rungs "
-                   "only (no network to train, no relief to fit)")  # fmt: skip
+                   "only (no network to train)")  # fmt: skip
     p.add_argument("--camera", type=whole, help="--lights on a field of points: the captured "
                    "camera whose view is relit")  # fmt: skip
     p.add_argument("--exr", action="store_true", help="--lights: also write linear OpenEXR")
