@@ -63,6 +63,8 @@ TRUSTED_DISAGREEMENT = 0.1
 #: Lights whose direction is this close to the normal's plane (cosine) say nothing of shadows.
 GRAZING_COSINE = 0.05
 _LEARNING_RATE, _SMOOTHNESS = 0.3, 0.01
+#: Lights whose rays are searched at once (the index is 4 bytes per pixel, light and offset).
+_RAY_CHUNK = 16
 _SHARPNESS_START, _SHARPNESS_END = 0.3, 0.03
 
 
@@ -76,20 +78,49 @@ def _image_rays(directions: NDArray[np.float64]) -> tuple[NDArray[np.float64], N
     return steps, slopes
 
 
-def _ray_pixels(
+def _ray_index(
     shape: tuple[int, int],
     visible: NDArray[np.bool_],
     pixels: NDArray[np.int64],
-    step: NDArray[np.float64],
-    offsets: NDArray[np.float64],
-) -> NDArray[np.int64]:
-    """Flat index (P, K) of the nearest visible pixel at each offset along ``step``; -1 else."""
+    steps: NDArray[np.float64],
+) -> NDArray[np.int32]:
+    """Flat index (P, Q, K) of the visible pixel at each ray offset toward each light.
+
+    ``steps`` (Q, 2) are the lights' unit steps in the image; the pixels are the nearest at
+    each of :data:`RAY_OFFSETS`. Where the ray has left the object the index is ``H * W``,
+    an extra height far below every other.
+    """
     rows, cols = np.divmod(pixels, shape[1])
-    c = np.rint(cols[:, None] + offsets[None, :] * step[0]).astype(np.int64)
-    r = np.rint(rows[:, None] + offsets[None, :] * step[1]).astype(np.int64)
-    inside = (c >= 0) & (c < shape[1]) & (r >= 0) & (r < shape[0])
-    index = np.where(inside, r * shape[1] + c, 0)
-    return np.where(inside & visible.ravel()[index], index, -1)
+    index = np.full((len(pixels), len(steps), len(RAY_OFFSETS)), shape[0] * shape[1], np.int32)
+    for q, step in enumerate(steps):
+        c = np.rint(cols[:, None] + RAY_OFFSETS[None, :] * step[0]).astype(np.int64)
+        r = np.rint(rows[:, None] + RAY_OFFSETS[None, :] * step[1]).astype(np.int64)
+        inside = (c >= 0) & (c < shape[1]) & (r >= 0) & (r < shape[0])
+        flat = np.where(inside, r * shape[1] + c, 0)
+        index[:, q] = np.where(inside & visible.ravel()[flat], flat, index[:, q])
+    return index
+
+
+def _horizons(
+    height: NDArray[np.float32], index: NDArray[np.int32], pixels: NDArray[np.int64]
+) -> tuple[NDArray[np.int64], NDArray[np.float32]]:
+    """Each ray's highest occluder (P, Q) and its distance (P, Q), pixels.
+
+    ``height`` holds the H * W heights and, last, the one far below every other that the
+    rays leaving the object point at.
+    """
+    occluder = np.zeros(index.shape[:2], dtype=np.int64)
+    distance = np.zeros(index.shape[:2], dtype=np.float32)
+    inverse = (1.0 / RAY_OFFSETS).astype(np.float32)
+    _highest_occluders(height, index, pixels, inverse, occluder, distance)
+    return occluder, distance
+
+
+def _informative(
+    normals: NDArray[np.float64], directions: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """(P, T): the lights not grazing each pixel's tangent plane, whose marks say something."""
+    return (normals @ directions.T) > GRAZING_COSINE
 
 
 @numba.njit(parallel=True, cache=True)
@@ -173,18 +204,14 @@ def relief_heights(
     pixels = np.flatnonzero(mask)
     ray, slope = _image_rays(d)
     lights = np.flatnonzero(np.isfinite(slope) & (d[:, 2] > 0))
-    informative = (n[pixels] @ d[lights].T) > GRAZING_COSINE
+    informative = _informative(n[pixels], d[lights])
     target = marks[pixels][:, lights] >= 0.5
     shadowed = informative & ~target
     if len(pixels) == 0 or not shadowed.any():
         return np.zeros(np.shape(visible), dtype=np.float32)
     torch.set_num_threads(threads or idle_cores())
-    rays = np.stack([_ray_pixels(shape, mask, pixels, ray[j], RAY_OFFSETS) for j in lights], axis=1)
-    missing = mask.size  # an extra height, far below everything, for rays that leave
-    index = np.ascontiguousarray(np.where(rays >= 0, rays, missing), dtype=np.int32)
-    inverse = (1.0 / RAY_OFFSETS).astype(np.float32)
-    occluder = np.zeros(index.shape[:2], dtype=np.int64)
-    distance = np.zeros(index.shape[:2], dtype=np.float32)
+    index = _ray_index(shape, mask, pixels, ray[lights])
+    missing = mask.size  # the extra height the rays that leave the object point at
     slopes = torch.from_numpy(slope[lights]).float()
     goal = torch.from_numpy(target.astype(np.float32))
     # Shadows are rare: weigh them up (square root of the imbalance) so they are not ignored.
@@ -203,7 +230,7 @@ def relief_heights(
     for step in range(steps):
         sharpness = max(_SHARPNESS_START * (1 - step / steps), _SHARPNESS_END)
         # The highest rise along each ray; only its occluder carries the gradient.
-        _highest_occluders(height.detach().numpy(), index, pixels, inverse, occluder, distance)
+        occluder, distance = _horizons(height.detach().numpy(), index, pixels)
         optimiser.zero_grad()
         horizon = (height[torch.from_numpy(occluder)] - height[own][:, None]) / torch.from_numpy(
             distance
@@ -261,36 +288,33 @@ def relief_visibility(
         raise InputError(f"relief heights {h.shape} and visible pixels {mask.shape} differ")
     shape = (h.shape[0], h.shape[1])
     pixels = np.flatnonzero(mask)
-    flat = h.ravel()
+    flat = np.append(h.ravel(), -1e4).astype(np.float32)
     ray, slope = _image_rays(d)
     out = np.ones((len(d), *shape), dtype=np.float32)
-    for q in range(len(d)):
-        if d[q, 2] <= 0.0:
-            out[q][mask] = 0.0
-            continue
-        if not np.isfinite(slope[q]):
-            continue  # straight overhead: a height field shadows nothing
-        rays = _ray_pixels(shape, mask, pixels, ray[q], RAY_OFFSETS)
-        rise = np.where(rays >= 0, (flat[np.maximum(rays, 0)] - flat[pixels][:, None]), -np.inf)
-        hard = out[q].ravel().copy()
-        hard[pixels] = (np.max(rise / RAY_OFFSETS, axis=1) <= slope[q]).astype(np.float32)
-        image = hard.reshape(shape)
-        if spread > 0:
-            soft = 0.5 * image
+    out[:, mask] = (d[:, 2] > 0.0).astype(np.float32)[:, None]
+    # Straight overhead a height field shadows nothing; a few lights' rays at a time.
+    cast = np.flatnonzero(np.isfinite(slope) & (d[:, 2] > 0.0))
+    for start in range(0, len(cast), _RAY_CHUNK):
+        chunk = cast[start : start + _RAY_CHUNK]
+        occluder, distance = _horizons(flat, _ray_index(shape, mask, pixels, ray[chunk]), pixels)
+        rise = (flat[occluder] - flat[pixels][:, None]) / distance
+        out[chunk[:, None], *np.divmod(pixels, shape[1])] = (rise <= slope[chunk]).T
+    if spread > 0:
+        for q in cast:
+            soft = 0.5 * out[q]
             for sign in (-1.0, 1.0):
                 shift = np.array(
                     [[1, 0, sign * spread * ray[q, 0]], [0, 1, sign * spread * ray[q, 1]]],
                     dtype=np.float32,
                 )
                 soft += 0.25 * cv2.warpAffine(
-                    image,
+                    out[q],
                     shift,
                     (shape[1], shape[0]),
                     flags=cv2.INTER_LINEAR,
                     borderMode=cv2.BORDER_REPLICATE,
                 )
-            image = np.where(mask, soft, 1.0).astype(np.float32)
-        out[q] = image
+            out[q] = np.where(mask, soft, 1.0)
     return np.ascontiguousarray(out.reshape(len(d), -1).T)
 
 
@@ -348,6 +372,8 @@ def relief_disagreement(
     shadows (0 where none does)
     """
     cast = relief_visibility(heights, directions, visible, spread=0.0)
-    informative = np.asarray(normals, dtype=np.float64) @ np.asarray(directions).T > GRAZING_COSINE
+    informative = _informative(
+        np.asarray(normals, dtype=np.float64), np.asarray(directions, dtype=np.float64)
+    )
     wrong = np.sum((cast >= 0.5) != (np.asarray(lit) >= 0.5), axis=1, where=informative)
     return (wrong / np.maximum(informative.sum(axis=1), 1)).astype(np.float32)

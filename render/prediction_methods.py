@@ -235,6 +235,7 @@ class _Relief:
     residual: _Residual
     _heights: dict[int, NDArray[np.float32]] = default(default_factory=dict)
     _trusted: dict[int, NDArray[np.bool_]] = default(default_factory=dict)
+    _unshadowed: _Model | None = None
 
     def _fit(self) -> tuple[ParametricFit, NDArray[np.float64]]:
         model = self.residual.base
@@ -275,12 +276,14 @@ class _Relief:
         cast = relief_visibility(heights, d @ frame.T, self.field.visibility[camera].reshape(shape))
         torn = (marks > _UNANIMOUS[0]) & (marks < _UNANIMOUS[1]) & self._trusted[camera][:, None]
         visibility = np.where(torn, cast, marks)
-        model = self.residual.base
-        assert isinstance(model, _Model)
-        unshadowed = _Model(
-            self.field, model.name,
-            replace(model.models, fits={model.name: replace(fit, lit=np.ones_like(fit.lit))}),
-        ).predict(camera, d)  # fmt: skip
+        if self._unshadowed is None:  # the model with every light reaching every pixel
+            model = self.residual.base
+            assert isinstance(model, _Model)
+            lit = replace(fit, lit=np.ones_like(fit.lit))
+            self._unshadowed = _Model(
+                self.field, model.name, replace(model.models, fits={model.name: lit})
+            )
+        unshadowed = self._unshadowed.predict(camera, d)
         correction = weights.apply(self.residual._residual_of(camera))
         return _bounded(self.field, camera, unshadowed * visibility.T[:, :, None] + correction)
 
