@@ -18,6 +18,7 @@ from render.prediction_methods import (
     BOUND,
     BOUND_SPACING_DEG,
     bound_factor,
+    despeckled,
     leave_one_out_barycentric,
 )
 from render.rti_fits import RBF_SIGMAS, choose_rbf_sigma, rbf_weights
@@ -174,6 +175,19 @@ def test_the_relief_rung_moves_cast_shadows_between_the_measured_lights(tmp_path
         for name in ("relief", "lambert+ggx+residual")
     }
     assert error["relief"] < 0.25 * error["lambert+ggx+residual"]
+
+
+def test_despeckled_fills_a_lone_lit_pixel_and_keeps_the_shadow_edge() -> None:
+    shape = (8, 10)
+    light = np.ones(shape, dtype=np.float32)
+    light[:, :5] = 0.0  # the relief's shadow, its edge between columns 4 and 5
+    light[3, 2] = 0.5  # a pixel the relief is not trusted on: interpolated marks
+    light[6, 8] = 0.5  # a half mark away from the relief's shadows keeps its detail
+    near = light == 0.0
+    out = despeckled(light.reshape(-1, 1), near.reshape(-1, 1), shape).reshape(shape)
+    assert np.all(out[:, :5] == 0.0)
+    assert out[6, 8] == 0.5
+    assert np.all(out[:, 5:][light[:, 5:] == 1.0] == 1.0)
 
 
 def test_leave_one_out_barycentric_rebuilds_the_triangulation_without_the_light() -> None:
