@@ -34,14 +34,17 @@ from numpy.typing import NDArray
 from core.errors import InputError, NotApplicable
 
 __all__ = [
+    "DECISIVE_TRAVEL",
     "EDGE_SPREAD_PX",
     "FIT_STEPS",
     "MAX_FIT_PIXELS",
     "RAY_OFFSETS",
     "TRUSTED_DISAGREEMENT",
+    "relief_contradictions",
     "relief_disagreement",
     "relief_heights",
     "relief_visibility",
+    "shadow_travel",
 ]
 
 #: Distances (pixels) along the ray toward the light where the horizon is looked for: dense
@@ -60,6 +63,11 @@ EDGE_SPREAD_PX = 1.0
 #: is not a height field's (an overhang, a brushed highlight read as shadow): its shadows
 #: between lights stay interpolated (see :func:`relief_disagreement`).
 TRUSTED_DISAGREEMENT = 0.1
+#: Shadow travel (:func:`shadow_travel`, pixels per pixel of height) above which a relief's
+#: shadow beats interpolated marks: the relief's edges are a pixel or two off, the marks' half
+#: shadows as wide as the travel. Path-traced 49-light domes, 20 test lights at 15, 45 and 75
+#: degrees (travel 2.5-94, 0.5-0.9, under 0.5): the relief everywhere lost 0.2-3 dB at 45.
+DECISIVE_TRAVEL = 1.0
 #: Lights whose direction is this close to the normal's plane (cosine) say nothing of shadows.
 GRAZING_COSINE = 0.05
 _LEARNING_RATE, _SMOOTHNESS = 0.3, 0.01
@@ -352,14 +360,43 @@ def _finer(
     return fine[: mask.shape[0], : mask.shape[1]].astype(np.float64) * scale * mask
 
 
-def relief_disagreement(
+def shadow_travel(
+    requested: NDArray[np.floating], measured: NDArray[np.floating], used: NDArray[np.bool_]
+) -> NDArray[np.float64]:
+    """How far a shadow moves between a requested light and the measured lights around it.
+
+    A point ``h`` above its surroundings casts its shadow ``h`` times the light's (x, y) / z
+    away; the travel is the largest change of that vector to a measured light the requested
+    one is interpolated from: the shadow's move per unit of occluder height.
+
+    Parameters
+    ----------
+    requested : ndarray, shape (Q, 3), unit vectors toward the requested lights, camera frame
+    measured : ndarray, shape (Q, k, 3), the measured lights each one is interpolated from
+    used : ndarray, shape (Q, k), bool, which of the k take part (a weight above 0)
+
+    Returns
+    -------
+    ndarray, shape (Q,), float64, pixels of shadow per pixel of height (0 where none takes
+    part; large toward the horizon)
+    """
+    q = np.asarray(requested, dtype=np.float64)
+    m = np.asarray(measured, dtype=np.float64)
+    floor = np.sin(np.radians(0.5))  # a light on the horizon casts an endless shadow
+    offset = q[:, :2] / np.maximum(q[:, 2:3], floor)
+    around = m[..., :2] / np.maximum(m[..., 2:3], floor)
+    moves = np.linalg.norm(around - offset[:, None, :], axis=2)
+    return np.max(np.where(used, moves, 0.0), axis=1, initial=0.0)
+
+
+def relief_contradictions(
     heights: NDArray[np.floating],
     lit: NDArray[np.integer],
     normals: NDArray[np.floating],
     directions: NDArray[np.floating],
     visible: NDArray[np.bool_],
-) -> NDArray[np.float32]:
-    """Share of each pixel's measured lights whose mark the relief's cast shadows contradict.
+) -> NDArray[np.int8]:
+    """Which measured marks the relief's cast shadows reproduce, per pixel and light.
 
     Parameters
     ----------
@@ -368,12 +405,28 @@ def relief_disagreement(
 
     Returns
     -------
-    ndarray, shape (H * W,), float32, 0..1 over the lights that say something of the pixel's
-    shadows (0 where none does)
+    ndarray, shape (H * W, T), int8: 1 the relief's shadow contradicts the mark, 0 it
+    reproduces it, -1 the light says nothing of the pixel's shadows (nearly in its tangent
+    plane, or below the image plane)
     """
     cast = relief_visibility(heights, directions, visible, spread=0.0)
     informative = _informative(
         np.asarray(normals, dtype=np.float64), np.asarray(directions, dtype=np.float64)
     )
-    wrong = np.sum((cast >= 0.5) != (np.asarray(lit) >= 0.5), axis=1, where=informative)
-    return (wrong / np.maximum(informative.sum(axis=1), 1)).astype(np.float32)
+    wrong = (cast >= 0.5) != (np.asarray(lit) >= 0.5)
+    return np.where(informative, wrong, -1).astype(np.int8)
+
+
+def relief_disagreement(contradictions: NDArray[np.int8]) -> NDArray[np.float32]:
+    """Share of each pixel's informative lights whose mark the relief contradicts.
+
+    Parameters
+    ----------
+    contradictions : ndarray, shape (H * W, T), int8, of :func:`relief_contradictions`
+
+    Returns
+    -------
+    ndarray, shape (H * W,), float32, 0..1 (0 where no light says anything of the pixel)
+    """
+    said = np.maximum((contradictions >= 0).sum(axis=1), 1)
+    return ((contradictions == 1).sum(axis=1) / said).astype(np.float32)

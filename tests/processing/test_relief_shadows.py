@@ -11,9 +11,11 @@ from core.errors import InputError
 from processing.interpolation import interpolation_weights
 from processing.relief_shadows import (
     GRAZING_COSINE,
+    relief_contradictions,
     relief_disagreement,
     relief_heights,
     relief_visibility,
+    shadow_travel,
 )
 
 SIZE = 48
@@ -111,10 +113,27 @@ def test_marks_that_do_not_fit_the_image_are_refused() -> None:
 
 def test_disagreement_is_the_share_of_a_pixels_lights_the_relief_contradicts() -> None:
     visible, lights, marks, normals = _measured(25)
-    assert (relief_disagreement(_block(), marks, normals, lights, visible) == 0).all()
-    flat = relief_disagreement(np.zeros((SIZE, SIZE)), marks, normals, lights, visible)
-    informative = (lights[:, 2] > GRAZING_COSINE).sum()
+    block = relief_contradictions(_block(), marks, normals, lights, visible)
+    assert (relief_disagreement(block) == 0).all()
+    flat = relief_contradictions(np.zeros((SIZE, SIZE)), marks, normals, lights, visible)
+    informative = lights[:, 2] > GRAZING_COSINE
+    np.testing.assert_array_equal(flat[:, ~informative], -1)
+    np.testing.assert_array_equal(flat[:, informative], 1 - marks[:, informative])
     np.testing.assert_allclose(
-        flat, (1 - marks[:, lights[:, 2] > GRAZING_COSINE]).sum(1) / informative
+        relief_disagreement(flat), (1 - marks[:, informative]).sum(1) / informative.sum()
     )
-    assert flat.max() > 0
+    assert relief_disagreement(flat).max() > 0
+
+
+def test_shadow_travel_is_the_shadows_move_per_unit_of_height() -> None:
+    def light(elevation: float, azimuth: float = 0.0) -> np.ndarray:
+        e, a = np.radians(elevation), np.radians(azimuth)
+        return np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+
+    requested = np.stack([light(45.0), light(45.0)])
+    around = np.stack([[light(45.0), light(15.0)], [light(45.0), light(45.0, 90.0)]])
+    travel = shadow_travel(requested, around, np.array([[True, True], [True, False]]))
+    # A shadow one height long at 45 degrees; at 15 degrees cot(15) = 3.73 heights long.
+    np.testing.assert_allclose(travel, [1.0 / np.tan(np.radians(15.0)) - 1.0, 0.0], atol=1e-9)
+    moved = shadow_travel(requested[:1], around[1:], np.array([[False, True]]))
+    np.testing.assert_allclose(moved, [np.sqrt(2.0)])  # a quarter turn at 45 degrees
