@@ -448,8 +448,18 @@ def test_the_level_table_is_eight_bit_levels(lion: ReflectanceField) -> None:
     # Every level boundary and its neighbours, every 7th float32 below 0.01 (where the
     # sRGB curve is steepest), random values in and out of 0..1, -0.0, and a capture.
     _, edges = _table()
-    boundaries = edges[np.isfinite(edges)].view(np.uint32).astype(np.int64)
-    assert len(boundaries) == 255
+    # The first float of each level 1..255, found apart from the table (bisection over the
+    # float bits): a boundary may fall inside a bucket (the table's edge) or on its start.
+    low_bits = np.zeros(255, dtype=np.int64)
+    high_bits = np.full(255, int(np.float32(1.0).view(np.uint32)), dtype=np.int64)
+    wanted = np.arange(1, 256, dtype=np.float32)
+    while (high_bits - low_bits > 1).any():
+        middle = (low_bits + high_bits) // 2
+        up = eight_bit_levels(middle.astype(np.uint32).view(np.float32)) >= wanted
+        high_bits, low_bits = np.where(up, middle, high_bits), np.where(up, low_bits, middle)
+    boundaries = high_bits
+    inside = edges[np.isfinite(edges)].view(np.uint32).astype(np.int64)
+    assert set(inside) <= set(boundaries) and len(inside) >= 250
     near = (boundaries[:, None] + np.arange(-50, 50)).reshape(-1).astype(np.uint32)
     low = np.arange(0, np.float32(0.01).view(np.uint32), 7, dtype=np.uint32)
     rng = np.random.default_rng(8)
