@@ -47,6 +47,7 @@ from processing.relief_shadows import (
     DECISIVE_TRAVEL,
     FIT_STEPS,
     TRUSTED_DISAGREEMENT,
+    despeckled,
     relief_contradictions,
     relief_disagreement,
     relief_heights,
@@ -64,7 +65,6 @@ __all__ = [
     "LightPredictor",
     "MixturePredictor",
     "bound_factor",
-    "despeckled",
     "leave_one_out_barycentric",
 ]
 
@@ -218,8 +218,6 @@ class _Residual:
         return _bounded(self.field, camera, self.base.predict(camera, directions) + correction)
 
 
-#: A pixel this far (visibility) above or below all eight neighbours is lone (:func:`despeckled`).
-LONE_STEP = 0.25
 #: Interpolated marks strictly between these: the measured lights around disagree, and the
 #: relief's shadow decides (where they agree, the shadow is where they put it).
 _UNANIMOUS = (0.02, 0.98)
@@ -286,17 +284,23 @@ class _Relief:
         shape = self.field.image_shape
         assert shape is not None
         seen = d @ frame.T
-        cast = relief_visibility(heights, seen, self.field.visibility[camera].reshape(shape))
-        # The relief decides where the measured lights around disagree, the shadow moves far
-        # between them, the pixel is trusted and the relief reproduces most of their marks
-        # there (all of them: an ideal block's error 0.26x the marks', not 0.11x).
+        # The relief decides where the shadow moves far between the measured lights around,
+        # they disagree, the pixel is trusted and the relief reproduces most of their marks
+        # there (all of them: an ideal block's error 0.26x the marks', not 0.11x). Elsewhere,
+        # and at every light high enough, its shadows are not cast at all.
         travel = shadow_travel(seen, measured[weights.indices] @ frame.T, weights.weights > 0)
-        reproduced = weights.apply(self._reproduced[camera]).T > 0.5  # most of the weight
-        torn = (
-            (marks > _UNANIMOUS[0]) & (marks < _UNANIMOUS[1]) & reproduced
-            & (travel > DECISIVE_TRAVEL)[None, :] & self._trusted[camera][:, None]
-        )  # fmt: skip
-        visibility = despeckled(np.where(torn, cast, marks), torn, shape)
+        decisive = np.flatnonzero(travel > DECISIVE_TRAVEL)
+        visibility = marks.astype(np.float32)
+        if len(decisive):
+            interpolated = marks[:, decisive]
+            reproduced = weights.apply(self._reproduced[camera]).T[:, decisive] > 0.5
+            torn = (
+                (interpolated > _UNANIMOUS[0]) & (interpolated < _UNANIMOUS[1]) & reproduced
+                & self._trusted[camera][:, None]
+            )  # fmt: skip
+            visible = self.field.visibility[camera].reshape(shape)
+            cast = relief_visibility(heights, seen[decisive], visible)
+            visibility[:, decisive] = despeckled(np.where(torn, cast, interpolated), torn, shape)
         if self._unshadowed is None:  # the model with every light reaching every pixel
             model = self.residual.base
             assert isinstance(model, _Model)
@@ -307,41 +311,6 @@ class _Relief:
         unshadowed = self._unshadowed.predict(camera, d)
         correction = weights.apply(self.residual._residual_of(camera))
         return _bounded(self.field, camera, unshadowed * visibility.T[:, :, None] + correction)
-
-
-def despeckled(
-    visibility: NDArray[np.float32], near: NDArray[np.bool_], shape: tuple[int, int]
-) -> NDArray[np.float32]:
-    """Each light's visibility image with lone pixels taken by their neighbours.
-
-    The relief's shadow and the interpolated marks are chosen per pixel (its trust, its
-    marks), so a shadow could hold lone lit pixels, seen at once by a user. A pixel next to
-    where the relief decides whose eight neighbours all lie more than :data:`LONE_STEP` on
-    one side of it takes the 3 x 3 median. Only lone pixels: a median everywhere lost the
-    copper bowl's rim detail (0.5 dB), and next to the relief's shadows the lion's (0.33 dB).
-
-    Parameters
-    ----------
-    visibility : ndarray, shape (H * W, Q), float32, 1 lit, 0 shadowed
-    near : ndarray, shape (H * W, Q), bool, the pixels and lights where the relief decides
-    shape : (H, W)
-
-    Returns
-    -------
-    ndarray, shape (H * W, Q), float32
-    """
-    # scipy's image filters: the well-kept median, neighbourhood extremes and dilation.
-    from scipy.ndimage import binary_dilation, maximum_filter, median_filter, minimum_filter
-
-    images = visibility.reshape(*shape, -1)
-    ring = np.ones((3, 3, 1), dtype=bool)
-    beside = binary_dilation(near.reshape(*shape, -1), ring).reshape(near.shape)
-    ring[1, 1, 0] = False
-    highest = maximum_filter(images, footprint=ring, mode="nearest").reshape(visibility.shape)
-    lowest = minimum_filter(images, footprint=ring, mode="nearest").reshape(visibility.shape)
-    lone = beside & ((highest < visibility - LONE_STEP) | (lowest > visibility + LONE_STEP))
-    smooth = median_filter(images, size=(3, 3, 1), mode="nearest").reshape(visibility.shape)
-    return np.where(lone, smooth, visibility)
 
 
 def leave_one_out_barycentric(

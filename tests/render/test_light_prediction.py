@@ -11,14 +11,13 @@ from core.errors import InputError
 from core.field_store import FieldStoreWriter, ReflectanceField
 from processing.interpolation import interpolation_weights
 from processing.learned_rti_training import TrainingSettings
-from processing.relief_shadows import relief_visibility
+from processing.relief_shadows import despeckled, relief_visibility
 from processing.sample_models import evaluate_basis
 from render.light_prediction import PREDICTORS, make_predictor
 from render.prediction_methods import (
     BOUND,
     BOUND_SPACING_DEG,
     bound_factor,
-    despeckled,
     leave_one_out_barycentric,
 )
 from render.rti_fits import RBF_SIGMAS, choose_rbf_sigma, rbf_weights
