@@ -43,6 +43,7 @@ from core.progress import progress_bar
 from processing.interpolation import InterpolationMethod, interpolation_weights, mean_spacing_deg
 from processing.learned_rti import LearnedRTI
 from processing.learned_rti_training import TrainingSettings, train_learned_rti
+from processing.mark_distances import distance_marks, distance_share, mark_distances
 from processing.relief_shadows import (
     DECISIVE_TRAVEL,
     FIT_STEPS,
@@ -54,7 +55,13 @@ from processing.relief_shadows import (
     relief_visibility,
     shadow_travel,
 )
-from processing.sample_models import ParametricFit, SampleModels, choose_model, evaluate_basis
+from processing.sample_models import (
+    ParametricFit,
+    SampleModels,
+    choose_model,
+    evaluate_basis,
+    leave_one_out_barycentric,
+)
 from processing.sample_models.bases import fit_basis
 from render.engines.model_shading import prepare_lighting, relight_models
 from render.rti_fits import fit_basis_8bit, rbf_weights
@@ -65,7 +72,6 @@ __all__ = [
     "LightPredictor",
     "MixturePredictor",
     "bound_factor",
-    "leave_one_out_barycentric",
 ]
 
 #: Fitted predictions are at most this times a sample's brightest measured value (dense
@@ -234,7 +240,9 @@ class _Relief:
     shadow moves further than its occluder is tall between the lights
     (:data:`processing.relief_shadows.DECISIVE_TRAVEL`), the relief reproduces the marks of
     the lights with most of the weight at the pixel, and of most of the pixel's lights
-    (:data:`processing.relief_shadows.TRUSTED_DISAGREEMENT`). Pixel fields (one view) only.
+    (:data:`processing.relief_shadows.TRUSTED_DISAGREEMENT`). Elsewhere the marks' edges
+    are blended as signed distances (:mod:`processing.mark_distances`) as far as that
+    predicted the measured images better than the faded marks. Pixel fields (one view) only.
     """
 
     field: ReflectanceField
@@ -245,6 +253,10 @@ class _Relief:
     #: Per camera (T, P): 1 where the relief reproduces a measured mark (or says nothing).
     _reproduced: dict[int, NDArray[np.float32]] = default(default_factory=dict)
     _unshadowed: _Model | None = None
+    #: Per camera: the measured marks' signed distances (T, P) and their weight (P,).
+    _moved: dict[int, tuple[NDArray[np.float32], NDArray[np.float32]]] = default(
+        default_factory=dict
+    )
 
     def _fit(self) -> tuple[ParametricFit, NDArray[np.float64]]:
         model = self.residual.base
@@ -274,6 +286,43 @@ class _Relief:
             self._reproduced[camera] = (contradictions != 1).T.astype(np.float32)
         return self._heights[camera]
 
+    def _unshadowed_model(self) -> _Model:
+        """The model with every light reaching every pixel: shading without its marks."""
+        if self._unshadowed is None:
+            model = self.residual.base
+            assert isinstance(model, _Model)
+            fit, _ = self._fit()
+            lit = replace(fit, lit=np.ones_like(fit.lit))
+            self._unshadowed = _Model(
+                self.field, model.name, replace(model.models, fits={model.name: lit})
+            )
+        return self._unshadowed
+
+    def moved_marks(self, camera: int) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """The measured marks' signed distances (T, P) and, per pixel (P,), their weight.
+
+        The weight is the share of the two blends' errors (:mod:`processing.mark_distances`)
+        when each measured image is predicted from the others, the model and its residual
+        as this rung predicts: the images', not the marks', since marks mistaken for
+        shadows (a brushed highlight) matter only as far as they change the image.
+        """
+        if camera not in self._moved:
+            shape = self.field.image_shape
+            assert shape is not None
+            fit, _ = self._fit()
+            measured = self.field.light_directions
+            lit = (fit.lit[:, : len(measured)].T >= 0.5).astype(np.float32)
+            distances = mark_distances(lit, shape)
+            unshadowed = self._unshadowed_model().predict(camera, measured)
+            residual = self.residual._residual_of(camera)
+            rest = leave_one_out_barycentric(measured, residual) - self.field.camera_slab(camera)
+            faded = leave_one_out_barycentric(measured, lit)
+            moved = distance_marks(leave_one_out_barycentric(measured, distances))
+            errors = [np.sum((unshadowed * m[:, :, None] + rest) ** 2, axis=(0, 2))
+                      for m in (faded, moved)]  # fmt: skip
+            self._moved[camera] = (distances, distance_share(*errors))
+        return self._moved[camera]
+
     def predict(self, camera: int, directions: NDArray[np.floating]) -> NDArray[np.float32]:
         heights = self.heights(camera)
         fit, frame = self._fit()
@@ -290,7 +339,11 @@ class _Relief:
         # and at every light high enough, its shadows are not cast at all.
         travel = shadow_travel(seen, measured[weights.indices] @ frame.T, weights.weights > 0)
         decisive = np.flatnonzero(travel > DECISIVE_TRAVEL)
-        visibility = marks.astype(np.float32)
+        # Between the lights the marks' edges move (their blended distances) where that
+        # predicted the measured images better than fading them.
+        distances, share = self.moved_marks(camera)
+        moved = distance_marks(weights.apply(distances).T)
+        visibility = (share[:, None] * moved + (1.0 - share[:, None]) * marks).astype(np.float32)
         if len(decisive):
             interpolated = marks[:, decisive]
             reproduced = weights.apply(self._reproduced[camera]).T[:, decisive] > 0.5
@@ -300,35 +353,11 @@ class _Relief:
             )  # fmt: skip
             visible = self.field.visibility[camera].reshape(shape)
             cast = relief_visibility(heights, seen[decisive], visible)
-            visibility[:, decisive] = despeckled(np.where(torn, cast, interpolated), torn, shape)
-        if self._unshadowed is None:  # the model with every light reaching every pixel
-            model = self.residual.base
-            assert isinstance(model, _Model)
-            lit = replace(fit, lit=np.ones_like(fit.lit))
-            self._unshadowed = _Model(
-                self.field, model.name, replace(model.models, fits={model.name: lit})
-            )
-        unshadowed = self._unshadowed.predict(camera, d)
+            between = np.where(torn, cast, visibility[:, decisive])
+            visibility[:, decisive] = despeckled(between, torn, shape)
+        unshadowed = self._unshadowed_model().predict(camera, d)
         correction = weights.apply(self.residual._residual_of(camera))
         return _bounded(self.field, camera, unshadowed * visibility.T[:, :, None] + correction)
-
-
-def leave_one_out_barycentric(
-    directions: NDArray[np.floating], values: NDArray[np.floating]
-) -> NDArray[np.float64]:
-    """Each measured light's values predicted barycentrically from the others: (T, ...).
-
-    The honest leave-one-light-out prediction: the triangulation is rebuilt without the
-    light (T triangulations of T - 1 directions).
-    """
-    d = np.asarray(directions, dtype=np.float64)
-    v = np.asarray(values)
-    out = np.zeros(v.shape, dtype=np.float64)
-    for j in range(len(d)):
-        keep = np.r_[0:j, j + 1 : len(d)]
-        weights = interpolation_weights(d[keep], d[j : j + 1], "barycentric", policy="clamp")
-        out[j] = weights.apply(v[keep])[0]
-    return out
 
 
 @dataclass

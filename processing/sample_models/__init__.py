@@ -138,7 +138,12 @@ from processing.sample_models.fitting import (
     lobe_alpha_range,
     sample_block_size,
 )
-from processing.sample_models.loo import LooError, interpolation_loo, leave_one_out_weights
+from processing.sample_models.loo import (
+    LooError,
+    interpolation_loo,
+    leave_one_out_barycentric,
+    leave_one_out_weights,
+)
 from processing.sample_models.shadows import (
     geometric_shadow_marks,
     shadow_mark_errors,
@@ -165,6 +170,7 @@ __all__ = [
     "format_loo_table",
     "geometric_shadow_marks",
     "interpolation_loo",
+    "leave_one_out_barycentric",
     "leave_one_out_weights",
     "lobe_alpha_range",
     "photometric_stereo",

@@ -16,7 +16,7 @@ from core.errors import NotApplicable
 from core.field_store import ReflectanceField
 from processing.interpolation import InterpolationMethod, interpolation_weights
 
-__all__ = ["LooError", "interpolation_loo", "leave_one_out_weights"]
+__all__ = ["LooError", "interpolation_loo", "leave_one_out_barycentric", "leave_one_out_weights"]
 
 
 @dataclass(frozen=True)
@@ -90,6 +90,30 @@ def leave_one_out_weights(
         indices[t, : len(i)], weights[t, : len(w)] = i, w
         indices[t, len(i) :] = i[0]
     return indices, weights
+
+
+def leave_one_out_barycentric(
+    directions: NDArray[np.floating], values: NDArray[np.floating]
+) -> NDArray[np.float64]:
+    """Each measured light's values predicted barycentrically from the others.
+
+    Parameters
+    ----------
+    directions : ndarray, shape (T, 3), the measured lights
+    values : ndarray, shape (T, ...), their values (images, marks, distances)
+
+    Returns
+    -------
+    ndarray, shape (T, ...), float64: the honest leave-one-light-out prediction, the
+    triangulation rebuilt without the light (:func:`leave_one_out_weights`)
+    """
+    v = np.asarray(values)
+    indices, weights = leave_one_out_weights(directions)
+    out = np.zeros(v.shape, dtype=np.float64)
+    expand = (slice(None),) + (None,) * (v.ndim - 1)
+    for j in range(indices.shape[1]):  # (T, ...) at a time: a (T, k, ...) gather is k fields
+        out += weights[:, j][expand] * v[indices[:, j]]
+    return out
 
 
 def interpolation_loo(

@@ -11,7 +11,7 @@ from core.camera_model import PinholeCamera
 from core.directions import direction_from_angles_deg, hemisphere_layout
 from core.errors import DatasetError, InputError
 from core.field_store import FieldStoreWriter, ReflectanceField
-from processing.interpolation import mean_spacing_deg
+from processing.interpolation import interpolation_weights, mean_spacing_deg
 from processing.sample_models import (
     ALPHA_RANGE,
     LOBE_SPACING,
@@ -24,6 +24,7 @@ from processing.sample_models import (
     format_loo_table,
     geometric_shadow_marks,
     interpolation_loo,
+    leave_one_out_barycentric,
     leave_one_out_weights,
     lobe_alpha_range,
     photometric_stereo,
@@ -398,3 +399,15 @@ def test_a_point_field_without_normals_is_refused(tmp_path: Path) -> None:
 def test_unfitted_model_names_are_refused(glossy_models: SampleModels) -> None:
     with pytest.raises(InputError, match="'hsh2' was not fitted"):
         choose_model(glossy_models, candidates=["hsh2"])
+
+
+def test_leave_one_out_barycentric_rebuilds_the_triangulation_without_the_light() -> None:
+    lights = hemisphere_layout(20, "fibonacci")
+    values = lights[:, 2:3] ** 2 + 0.1 * lights[:, :1]  # smooth in the light direction
+    held_out = leave_one_out_barycentric(lights, values)
+    for j in (0, 7, 19):
+        others = np.delete(np.arange(20), j)
+        weights = interpolation_weights(lights[others], lights[j : j + 1], "barycentric",
+                                        policy="clamp")  # fmt: skip
+        np.testing.assert_allclose(held_out[j], weights.apply(values[others])[0])
+    assert not np.allclose(held_out, values)  # the light itself never helps predict it
