@@ -11,6 +11,7 @@ from core.field_store import ReflectanceField
 from processing.rti import import_rti
 from render.prediction_methods import MixturePredictor
 from render.rung_choice import (
+    GAP_EXPONENT,
     INTERPOLATION_FOLDS,
     LOWEST,
     UseGaps,
@@ -74,7 +75,7 @@ def test_the_use_gap_scales_only_the_excess_over_the_error_at_the_measured_light
     assert 0.0 <= between.ratio < 0.2 and between.outside == 0.0
     inside, held = np.array([1.0, 4.0]), [np.array([9.0, 4.0]), np.array([9.0, 2.0])]
     expected = UseGaps(0.5, 0.0).use_errors(inside, held)
-    np.testing.assert_allclose(expected, [1.0 + 8.0 * 0.5**1.5, 4.0])
+    np.testing.assert_allclose(expected, [1.0 + 8.0 * 0.5**GAP_EXPONENT, 4.0])
 
 
 def test_two_materials_are_predicted_by_a_rung_or_a_mixture_that_beats_each_alone(
