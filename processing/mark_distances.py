@@ -2,18 +2,19 @@
 
 A pixel field's shadow marks (1 lit, 0 shadowed, per pixel and measured light) are known at
 the measured lights only. Blending the marks of the lights around a requested one (the
-barycentric weights) fades a moving shadow out at each measured position and in at none:
-three ghosts, each a third dark, none where the shadow is. Blending each mark image's signed
+barycentric weights) fades a moving shadow out at each measured position and in at none: up
+to three ghosts, each partly dark, none quite where the shadow is. Blending each mark image's signed
 distance to its shadow's edge instead moves the edge: where a shadow slides by less than its
 width between two lights, the blend of the distances puts the edge between its two measured
 positions, as morphing by distance fields does. Where it moves further than it is wide, or
 turns about its occluder (a high light between lights on opposite sides), the blended
 distance loses it, and the faded marks were nearer.
 
-So the two are mixed per pixel by how each predicts the measured lights' own marks from the
-others (leave one light out, :func:`distance_share`). On the path-traced 49-light domes
-(``rig sim rti``), the ``relief`` rung's PSNR at 20 test lights rose 0.03-2.7 dB on eight of
-nine scenes and fell 0.3 dB on the ninth, a brushed knot (``docs/evaluation.md``).
+So the two are mixed per pixel by how each, with the shading it darkens, predicted the
+measured images from the other lights (leave one light out; :func:`distance_share` makes the
+two errors a weight). On the path-traced 49-light domes (``rig sim rti``), the ``relief``
+rung's PSNR at 20 test lights rose 0.03-2.7 dB on eight of nine scenes and fell 0.3 dB on the
+ninth, a brushed knot (``docs/evaluation.md``).
 """
 
 from __future__ import annotations

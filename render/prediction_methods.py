@@ -315,9 +315,11 @@ class _Relief:
             distances = mark_distances(lit, shape)
             unshadowed = self._unshadowed_model().predict(camera, measured)
             residual = self.residual._residual_of(camera)
-            rest = leave_one_out_barycentric(measured, residual) - self.field.camera_slab(camera)
-            faded = leave_one_out_barycentric(measured, lit)
-            moved = distance_marks(leave_one_out_barycentric(measured, distances))
+            # One leave-one-out pass (T triangulations) for the residual, marks and distances.
+            stacked = np.concatenate([residual, lit[:, :, None], distances[:, :, None]], axis=2)
+            held_out = leave_one_out_barycentric(measured, stacked)
+            rest = held_out[:, :, :3] - self.field.camera_slab(camera)
+            faded, moved = held_out[:, :, 3], distance_marks(held_out[:, :, 4])
             errors = [np.sum((unshadowed * m[:, :, None] + rest) ** 2, axis=(0, 2))
                       for m in (faded, moved)]  # fmt: skip
             self._moved[camera] = (distances, distance_share(*errors))
