@@ -178,7 +178,7 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
     from processing.image_quality import clipped_srgb_8bit, display_scale
     from render.field_view import FieldView
     from render.light_prediction import make_predictor
-    from render.rung_choice import choose_light_rung
+    from render.rung_choice import MIXTURE_MARGIN_DB, choose_light_rung
 
     directory = require_output(args.output, directory=True)
     lights = read_lp(args.lights)
@@ -206,7 +206,12 @@ def relight_lights(args: argparse.Namespace, field: Any) -> int:
             note = f" {score.note}" if score.note else ""
             print(f"  {score.name:<22} {psnr}  ({score.seconds:.1f} s){note}")
         method = choice.describe()
-        print(f"method: {method} (best held-out PSNR, {' and '.join(choice.folds)}; chosen in "
+        why = (
+            "best held-out PSNR"
+            if choice.scores[0].name == choice.name
+            else f"best single rung: the mixture is not {MIXTURE_MARGIN_DB:g} dB better"
+        )
+        print(f"method: {method} ({why}, {' and '.join(choice.folds)}; chosen in "
               f"{sum(s.seconds for s in choice.scores if s.name != 'mixture'):.0f} s)")  # fmt: skip
         predictor = choice.predictor(field)
     else:

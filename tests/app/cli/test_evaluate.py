@@ -89,3 +89,29 @@ def test_relight_under_the_lights_of_an_lp_file(
     assert "would be written outside" in capsys.readouterr().err
     assert main([*argv, "--env", str(lights)]) == 2
     assert "give --env PANORAMA" in capsys.readouterr().err
+
+
+def test_relight_chooses_the_rung_and_says_why(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    fit = _lp(tmp_path / "fit.lp", range(0, 240, 4))
+    directions = read_lp(RTI / "dirs.lp").directions[[1, 119]]
+    test = tmp_path / "new.lp"
+    test.write_text("2\n" + "".join(f"{n}.png {x} {y} {z}\n" for n, (x, y, z) in
+                                     zip("ab", directions, strict=True)))  # fmt: skip
+    assert (
+        main(["relight", str(fit), "--lights", str(test), "--fast", "-o", str(tmp_path / "o")]) == 0
+    )
+    out = capsys.readouterr().out
+    ranked = [
+        line.split()[0] for line in out.splitlines() if line.startswith("  ") and " dB " in line
+    ]
+    method = next(line for line in out.splitlines() if line.startswith("method: "))
+    if ranked[0] == "mixture" and "mixture" not in method:  # a tie keeps the single rung
+        assert f"method: {ranked[1]} (best single rung: the mixture is not 0.2 dB better" in method
+    else:
+        assert method.startswith(
+            f"method: {'a per-pixel' if ranked[0] == 'mixture' else ranked[0]}"
+        )
+        assert "(best held-out PSNR" in method
+    assert len(list((tmp_path / "o").rglob("*.png"))) == 2
