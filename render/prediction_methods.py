@@ -378,8 +378,9 @@ class _Adaptive:
             data = self.field.camera_slab(camera)
             residual = self.residual._residual_of(camera)
             fitted = data - residual
-            alone = leave_one_out_barycentric(measured, data)
-            helped = fitted + leave_one_out_barycentric(measured, residual)
+            # One leave-one-out pass (T triangulations) for the images and the residual.
+            held_out = leave_one_out_barycentric(measured, np.concatenate([data, residual], 2))
+            alone, helped = held_out[:, :, :3], fitted + held_out[:, :, 3:]
             error_alone = np.sum((alone - data) ** 2, axis=(0, 2))
             error_helped = np.sum((helped - data) ** 2, axis=(0, 2))
             total = error_alone + error_helped

@@ -141,12 +141,17 @@ def test_every_method_has_a_predictor_and_unknown_ones_are_refused(tmp_path: Pat
         make_predictor(field, "splines")
 
 
-def test_the_relief_rung_moves_cast_shadows_between_the_measured_lights(tmp_path: Path) -> None:
-    # A matte block on a matte base: at low lights between the measured ones the shadow has
-    # moved, and interpolated marks give two half shadows.
+def _block_errors(
+    path: Path, block: slice, height: float, elevation_deg: float
+) -> dict[str, float]:
+    """Mean squared errors of ``relief`` and ``lambert+ggx+residual`` on a matte block.
+
+    A 40 x 40 matte base with a square ``block`` of ``height`` pixels, measured under 49
+    lights, predicted at nine azimuths at ``elevation_deg``.
+    """
     size = 40
     heights = np.zeros((size, size))
-    heights[14:26, 14:26] = 5.0
+    heights[block, block] = height
     visible = np.ones((size, size), dtype=bool)
 
     def values(directions: np.ndarray) -> np.ndarray:
@@ -154,8 +159,8 @@ def test_the_relief_rung_moves_cast_shadows_between_the_measured_lights(tmp_path
         shade = 0.6 * np.clip(directions[:, 2], 0.0, None)[:, None] * lit
         return np.repeat(shade[:, :, None], 3, axis=2)
 
-    field = _pixel_field(tmp_path / "f.zarr", values, lights=49, shape=(size, size))
-    elevation = np.radians(15.0)
+    field = _pixel_field(path, values, lights=49, shape=(size, size))
+    elevation = np.radians(elevation_deg)
     azimuths = np.radians(np.arange(10.0, 360.0, 40.0))
     new = np.stack(
         [np.cos(elevation) * np.cos(azimuths), np.cos(elevation) * np.sin(azimuths),
@@ -163,10 +168,16 @@ def test_the_relief_rung_moves_cast_shadows_between_the_measured_lights(tmp_path
     )  # fmt: skip
     truth = values(new)
     rig = camera_to_rig(new, field.cameras[0])
-    error = {
+    return {
         name: float(np.mean((make_predictor(field, name).predict(0, rig) - truth) ** 2))
         for name in ("relief", "lambert+ggx+residual")
     }
+
+
+def test_the_relief_rung_moves_cast_shadows_between_the_measured_lights(tmp_path: Path) -> None:
+    # At low lights between the measured ones the shadow has moved, and interpolated marks
+    # give two half shadows.
+    error = _block_errors(tmp_path / "f.zarr", slice(14, 26), 5.0, 15.0)
     assert error["relief"] < 0.25 * error["lambert+ggx+residual"]
 
 
@@ -175,29 +186,7 @@ def test_the_relief_rung_slides_shadows_it_does_not_cast_between_the_measured_li
 ) -> None:
     # At 45 degrees a shadow moves less than its occluder is tall between the lights, and the
     # relief does not decide it: the marks' edges are blended as distances, not faded.
-    size = 40
-    heights = np.zeros((size, size))
-    heights[15:25, 15:25] = 12.0
-    visible = np.ones((size, size), dtype=bool)
-
-    def values(directions: np.ndarray) -> np.ndarray:
-        lit = relief_visibility(heights, directions, visible, spread=0).T
-        shade = 0.6 * np.clip(directions[:, 2], 0.0, None)[:, None] * lit
-        return np.repeat(shade[:, :, None], 3, axis=2)
-
-    field = _pixel_field(tmp_path / "f.zarr", values, lights=49, shape=(size, size))
-    elevation = np.radians(45.0)
-    azimuths = np.radians(np.arange(10.0, 360.0, 40.0))
-    new = np.stack(
-        [np.cos(elevation) * np.cos(azimuths), np.cos(elevation) * np.sin(azimuths),
-         np.full_like(azimuths, np.sin(elevation))], axis=1,
-    )  # fmt: skip
-    truth = values(new)
-    rig = camera_to_rig(new, field.cameras[0])
-    error = {
-        name: float(np.mean((make_predictor(field, name).predict(0, rig) - truth) ** 2))
-        for name in ("relief", "lambert+ggx+residual")
-    }
+    error = _block_errors(tmp_path / "f.zarr", slice(15, 25), 12.0, 45.0)
     assert error["relief"] < 0.75 * error["lambert+ggx+residual"], error
 
 
