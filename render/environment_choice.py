@@ -60,6 +60,7 @@ from render.engines.modes import MOST_ACCURATE_MODELS, RelightMode
 from render.engines.predicted import PredictorRelightSettings
 from render.light_prediction import make_predictor
 from render.light_splits import lowest_lights, split_lights
+from render.rung_choice import GAP_EXPONENT
 
 __all__ = [
     "ENVIRONMENT_CANDIDATES",
@@ -84,6 +85,7 @@ ENVIRONMENT_CANDIDATES = (
     "lambert+ggx+residual",
     "light-stage+lambert+ggx",
     "adaptive",
+    "relief",
 )
 #: Candidates that train a network (minutes): left out by ``fast``.
 SLOW_CANDIDATES = ("learned+residual",)
@@ -93,11 +95,6 @@ EXTRAPOLATION_SHARE = 0.02
 OUTSIDE_GRID = 32
 #: Share of the light split off as sharp below which the light-stage sum relights it all.
 SHARP_SHARE = 0.01
-#: How a summed panorama's error grows with its gap (as :data:`render.rung_choice.GAP_EXPONENT`
-#: for single lights, where held-out lights measured 1). Kept at 1.5, the value the
-#: environment benchmark's figures (``docs/evaluation.md``) were measured with: its renders
-#: were not at hand to measure the change.
-GAP_EXPONENT = 1.5
 
 
 @dataclass(frozen=True)
