@@ -31,12 +31,14 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from core.directions import farthest_point_order
 from core.errors import InputError, NotApplicable
 
 __all__ = [
     "DECISIVE_TRAVEL",
     "EDGE_SPREAD_PX",
     "FIT_STEPS",
+    "MAX_FIT_LIGHTS",
     "MAX_FIT_PIXELS",
     "RAY_OFFSETS",
     "TRUSTED_DISAGREEMENT",
@@ -58,6 +60,9 @@ FIT_STEPS = 200
 #: Larger images are fitted at a coarser scale (heights scaled back up): the cost and the
 #: memory (4 bytes per pixel, light and ray offset) are per pixel.
 MAX_FIT_PIXELS = 20_000
+#: More lights are fitted through this many spread over them: the cost is per light too, and a
+#: dense dome's neighbouring shadows say little more about the heights.
+MAX_FIT_LIGHTS = 100
 #: Position error (pixels) of a cast shadow's edge that visibility is softened by.
 EDGE_SPREAD_PX = 1.0
 #: A pixel whose measured marks the relief contradicts at more than this share of its lights
@@ -170,6 +175,9 @@ def relief_heights(
 ) -> NDArray[np.float32]:
     """Heights of the surface whose cast shadows best match the measured shadow marks.
 
+    More than :data:`MAX_FIT_LIGHTS` lights (above the horizon) are fitted through that many,
+    spread over them (farthest-point order), as a larger image is fitted coarser.
+
     Parameters
     ----------
     lit : ndarray, shape (H * W, T), 1 lit (or unknown), 0 shadowed, per pixel and light
@@ -215,6 +223,7 @@ def relief_heights(
     pixels = np.flatnonzero(mask)
     ray, slope = _image_rays(d)
     lights = np.flatnonzero(np.isfinite(slope) & (d[:, 2] > 0))
+    lights = np.sort(lights[farthest_point_order(d[lights])[:MAX_FIT_LIGHTS]])
     informative = _informative(n[pixels], d[lights])
     target = marks[pixels][:, lights] >= 0.5
     shadowed = informative & ~target

@@ -11,9 +11,10 @@ predicted at its own directions by the rung chosen for it here: when that light 
 Under an environment a rung is used as a weighted sum of its predictions, so the error that
 matters is not one light's but the panorama's sum's. The choice therefore looks like the use:
 
-1. the field's lights are split (every other light, and the
-   lowest lights held out when part of the sharp light lies below the measured lights, so
-   extrapolation is tested where the use extrapolates);
+1. the field's lights are split (a spread quarter held out in turn, twice, as the
+   single-light choice splits them, and the lowest lights held out when part of the sharp
+   light lies below the measured lights, so extrapolation is tested where the use
+   extrapolates);
 2. the sharp light (as the object sees it: below the horizon blocked when the capture says so)
    is gathered into the spherical Voronoi cells of the held-out lights, E_j;
 3. the truth is the sum of the held-out images weighted by E_j, and each candidate predicts
@@ -22,7 +23,7 @@ matters is not one light's but the panorama's sum's. The choice therefore looks 
    the same sum at the measured lights scaled to the panorama's gaps as
    :class:`render.rung_choice.UseGaps` scales it, the splits weighted by the share
    of the light they stand for (the lowest lights: the share outside the measured
-   lights; every other light: the rest).
+   lights; the quarters: the rest).
 
 The winner is refitted on every light and relights the sharp light through
 :class:`render.engines.predicted.PredictorRelightSettings` with ``split``, the sum the rest;
@@ -59,12 +60,13 @@ from render.engines.interpolated import RelightSettings
 from render.engines.modes import MOST_ACCURATE_MODELS, RelightMode
 from render.engines.predicted import PredictorRelightSettings
 from render.light_prediction import make_predictor
-from render.light_splits import lowest_lights, split_lights
-from render.rung_choice import GAP_EXPONENT
+from render.light_splits import lowest_lights
+from render.rung_choice import GAP_EXPONENT, LOWEST, light_folds
 
 __all__ = [
     "ENVIRONMENT_CANDIDATES",
     "LIGHT_STAGE",
+    "MIN_LIGHTS",
     "SHARP_SHARE",
     "SLOW_CANDIDATES",
     "CandidateScore",
@@ -89,6 +91,8 @@ ENVIRONMENT_CANDIDATES = (
 )
 #: Candidates that train a network (minutes): left out by ``fast``.
 SLOW_CANDIDATES = ("learned+residual",)
+#: The fewest lights the choice splits.
+MIN_LIGHTS = 6
 #: Share of the panorama's light below the measured lights above which extrapolation is tested.
 EXTRAPOLATION_SHARE = 0.02
 #: Rows of the blocks the panorama's light outside the measured region is read from.
@@ -149,20 +153,34 @@ Split = tuple[str, NDArray[np.int64], NDArray[np.int64], float]
 def held_out_splits(field: ReflectanceField, panorama: Panorama) -> list[Split]:
     """The (name, fit, test, weight) light splits that resemble relighting under ``panorama``.
 
-    The weights sum to 1: the lowest lights' split weighs the share of the panorama's light
-    outside the measured lights, when above :data:`EXTRAPOLATION_SHARE`.
+    The folds between the lights are the single-light choice's
+    (:func:`render.rung_choice.light_folds`: a spread quarter of the lights held out in turn,
+    so a rung is fitted at three quarters of the use's density, and a sun is scored on two
+    held-out sets). The weights sum to 1: the lowest lights' split weighs the share of the
+    panorama's light outside the measured lights, when above :data:`EXTRAPOLATION_SHARE`.
+
+    Raises
+    ------
+    InputError
+        Fewer than :data:`MIN_LIGHTS` lights.
     """
-    fit, test = split_lights(field, "every-other")
-    splits = [("every other light", fit, test, 1.0)]
+    if field.shape[1] < MIN_LIGHTS:
+        raise InputError(
+            f"{field.path}: {field.shape[1]} lights are too few to choose a relighting by "
+            f"held-out lights ({MIN_LIGHTS} or more); name one with --method"
+        )
     grid = grid_lights(panorama.rgb, OUTSIDE_GRID).nonempty()
     energy = grid.rgb.sum(axis=1)
     outside = MeasuredRegion.build(field.light_directions).outside(grid.directions)
     share = float(energy[outside].sum() / energy.sum()) if energy.sum() > 0 else 0.0
     lowest = lowest_lights(field)
-    if share > EXTRAPOLATION_SHARE and len(lowest) <= field.shape[1] - 3:
+    below = share > EXTRAPOLATION_SHARE and len(lowest) <= field.shape[1] - 3
+    between = light_folds(field)
+    inside = (1.0 - share if below else 1.0) / len(between)
+    splits = [(name, fit, test, inside) for name, fit, test in between]
+    if below:
         rest = np.setdiff1d(np.arange(field.shape[1], dtype=np.int64), lowest)
-        splits = [("every other light", fit, test, 1.0 - share),
-                  ("the lowest lights", rest, lowest, share)]  # fmt: skip
+        splits.append((LOWEST, rest, lowest, share))
     return splits
 
 
@@ -237,7 +255,7 @@ def choose_environment_mode(
     Raises
     ------
     InputError
-        A field of points, or a field too small to split (fewer than six lights). A candidate
+        A field of points, or one with fewer than :data:`MIN_LIGHTS` lights. A candidate
         that does not apply (:class:`core.errors.NotApplicable`) is left out with its reason;
         any other error of a candidate stops the choice.
     """
@@ -258,7 +276,7 @@ def choose_environment_mode(
     notes: dict[str, str] = {}
     bar = progress_bar(total=len(names) * len(splits), desc="choosing", unit="method")
     everything = np.arange(field.shape[1], dtype=np.int64)
-    ratios = [_gap_ratio(field, panorama, split, below=i > 0) for i, split in enumerate(splits)]
+    ratios = [_gap_ratio(field, panorama, split, below=split[0] == LOWEST) for split in splits]
     inside: dict[str, float] = {}
     try:
         for ratio, (_, fit, test, weight) in zip(ratios, splits, strict=True):
@@ -299,7 +317,10 @@ def choose_environment_mode(
     against = (
         f", the light-stage sum {stage.error:.1%}" if stage is not None and best != stage else ""
     )
-    how = " and ".join(f"{name}, {weight:.0%}" for name, _, _, weight in splits)
+    between = sum(weight for name, _, _, weight in splits if name != LOWEST)
+    how = f"a spread quarter in turn, {between:.0%}" + "".join(
+        f" and {name}, {weight:.0%}" for name, _, _, weight in splits if name == LOWEST
+    )
     share = (
         f"{parts.sharp_share:.0%} of the light (concentrated within a light's cell or outside "
         "the measured lights)"

@@ -224,9 +224,10 @@ class _Residual:
         return _bounded(self.field, camera, self.base.predict(camera, directions) + correction)
 
 
-#: Interpolated marks strictly between these: the measured lights around disagree, and the
-#: relief's shadow decides (where they agree, the shadow is where they put it).
+#: Interpolated marks strictly between these: the lights around disagree, the relief decides.
 _UNANIMOUS = (0.02, 0.98)
+#: Barycentric weights below this are rounding (a measured light's neighbours get 1e-16).
+_NEGLIGIBLE = 1e-9
 
 
 @dataclass
@@ -265,15 +266,18 @@ class _Relief:
         assert isinstance(fit, ParametricFit)
         return fit, model.models.camera_frame
 
+    def _image_shape(self) -> tuple[int, int]:
+        shape = self.field.image_shape
+        if shape is None or self.field.shape[0] != 1:
+            raise NotApplicable("relief shadows need a field of pixels seen by one camera")
+        return shape
+
     def heights(self, camera: int) -> NDArray[np.float32]:
         """The relief (H, W) fitted to ``camera``'s shadow marks, pixel units."""
         if camera not in self._heights:
-            shape = self.field.image_shape
-            if shape is None or self.field.shape[0] != 1:
-                raise NotApplicable("relief shadows need a field of pixels seen by one camera")
             fit, frame = self._fit()
             count = len(self.field.light_directions)
-            visible = self.field.visibility[camera].reshape(shape)
+            visible = self.field.visibility[camera].reshape(self._image_shape())
             marks, normals = fit.lit[:, :count], fit.normals @ frame.T
             lights = self.field.light_directions @ frame.T
             with progress_bar(total=FIT_STEPS, desc="relief", unit="step") as bar:
@@ -307,8 +311,7 @@ class _Relief:
         shadows (a brushed highlight) matter only as far as they change the image.
         """
         if camera not in self._moved:
-            shape = self.field.image_shape
-            assert shape is not None
+            shape = self._image_shape()
             fit, _ = self._fit()
             measured = self.field.light_directions
             lit = (fit.lit[:, : len(measured)].T >= 0.5).astype(np.float32)
@@ -326,20 +329,18 @@ class _Relief:
         return self._moved[camera]
 
     def predict(self, camera: int, directions: NDArray[np.floating]) -> NDArray[np.float32]:
-        heights = self.heights(camera)
+        shape = self._image_shape()
         fit, frame = self._fit()
         measured = self.field.light_directions
         d = np.asarray(directions, dtype=np.float64)
         weights = interpolation_weights(measured, d, "barycentric", policy="clamp")
         marks = weights.apply(fit.lit[:, : len(measured)].T.astype(np.float32)).T
-        shape = self.field.image_shape
-        assert shape is not None
         seen = d @ frame.T
         # The relief decides where the shadow moves far between the measured lights around,
         # they disagree, the pixel is trusted and the relief reproduces most of their marks
-        # there (all of them: an ideal block's error 0.26x the marks', not 0.11x). Elsewhere,
-        # and at every light high enough, its shadows are not cast at all.
-        travel = shadow_travel(seen, measured[weights.indices] @ frame.T, weights.weights > 0)
+        # (all: an ideal block's error 0.26x the marks', not 0.11x); elsewhere it casts none.
+        around = measured[weights.indices] @ frame.T
+        travel = shadow_travel(seen, around, weights.weights > _NEGLIGIBLE)
         decisive = np.flatnonzero(travel > DECISIVE_TRAVEL)
         # Between the lights the marks' edges move (their blended distances) where that
         # predicted the measured images better than fading them.
@@ -347,6 +348,8 @@ class _Relief:
         moved = distance_marks(weights.apply(distances).T)
         visibility = (share[:, None] * moved + (1.0 - share[:, None]) * marks).astype(np.float32)
         if len(decisive):
+            # Fitted only now: the choices' scores at the measured lights cost no fit.
+            heights = self.heights(camera)
             interpolated = marks[:, decisive]
             reproduced = weights.apply(self._reproduced[camera]).T[:, decisive] > 0.5
             torn = (

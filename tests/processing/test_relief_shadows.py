@@ -102,6 +102,24 @@ def test_a_large_image_is_fitted_coarser_and_returned_at_its_own_size(
     assert 3.0 < float(heights[21:27, 21:27].mean() - heights[:8, :8].mean()) < 10.0
 
 
+def test_a_dense_dome_is_fitted_through_lights_spread_over_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(relief, "MAX_FIT_LIGHTS", 16)
+    seen: list[int] = []
+    horizons = relief._horizons
+
+    def counted(height: np.ndarray, index: np.ndarray, pixels: np.ndarray) -> object:
+        seen.append(index.shape[1])
+        return horizons(height, index, pixels)
+
+    monkeypatch.setattr(relief, "_horizons", counted)
+    visible, lights, marks, normals = _measured(64)
+    heights = relief_heights(marks, normals, lights, visible, steps=100, threads=1)
+    assert set(seen) == {16}  # every step sees 16 of the 64 lights
+    assert 3.0 < float(heights[21:27, 21:27].mean() - heights[:8, :8].mean()) < 10.0
+
+
 def test_marks_that_do_not_fit_the_image_are_refused() -> None:
     visible = np.ones((4, 4), dtype=bool)
     lights = hemisphere_layout(5, "fibonacci")

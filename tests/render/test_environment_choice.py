@@ -112,18 +112,28 @@ def test_the_choice_scores_every_quick_candidate_and_opens_the_winner(
 def test_the_lowest_ring_is_held_out_when_the_panorama_lights_from_below_the_lights(
     plane: ReflectanceField,
 ) -> None:
+    quarters = [f"spread group {g} of 4" for g in (1, 2)]
     overhead = np.zeros((32, 64, 3), dtype=np.float32)
     overhead[:4] = 1.0
-    assert [(n, w) for n, _, _, w in held_out_splits(plane, panorama_from_array(overhead))] == [
-        ("every other light", 1.0)
-    ]
+    splits = held_out_splits(plane, panorama_from_array(overhead))
+    assert [(n, w) for n, _, _, w in splits] == [(q, 0.5) for q in quarters]
+    for _, fit, test, _ in splits:  # three quarters of the lights fit, the rest held out
+        assert np.intersect1d(fit, test).size == 0 and len(fit) + len(test) == plane.shape[1]
+        assert len(test) in (12, 13)
     low = np.zeros((32, 64, 3), dtype=np.float32)
     low[14:16] = 1.0  # just above the horizon, under the dome's lowest lights
     splits = held_out_splits(plane, panorama_from_array(low))
-    assert [n for n, _, _, _ in splits] == ["every other light", "the lowest lights"]
-    assert splits[1][3] > 0.2 and sum(w for _, _, _, w in splits) == pytest.approx(1.0)
-    _, fit, test, _ = splits[1]
+    assert [n for n, _, _, _ in splits] == [*quarters, "the lowest lights"]
+    assert splits[2][3] > 0.2 and sum(w for _, _, _, w in splits) == pytest.approx(1.0)
+    _, fit, test, _ = splits[2]
     assert np.intersect1d(fit, test).size == 0 and len(fit) + len(test) == plane.shape[1]
+
+
+def test_too_few_lights_to_hold_out_are_refused_with_what_to_do(plane: ReflectanceField) -> None:
+    from core.errors import InputError
+
+    with pytest.raises(InputError, match=r"5 lights are too few.*--method"):
+        held_out_splits(plane.subset(lights=np.arange(5)), _white_sky())  # type: ignore[arg-type]
 
 
 def test_a_predictor_mode_refuses_a_field_of_points_with_what_to_do(tmp_path: Path) -> None:
