@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -174,7 +175,9 @@ def test_a_captures_best_mode_is_rig_relights_choice_under_each_panorama(
             field, PanoramaControls().as_seen(panorama, field), fast=True
         )
         assert frame.relight_mode == expected.mode
-        assert live.best_reason(name) == expected.reason
+        # The same choice and figures; the seconds it took differ between the two runs.
+        timeless = re.compile(r"\(\d+ s to choose")
+        assert timeless.sub("(", live.best_reason(name)) == timeless.sub("(", expected.reason)
     # Chosen once a panorama: turning it keeps the choice.
     again = live.render(live.initial.updated({"panorama": "sun", "yaw_deg": 200.0}))
     assert again.relight_mode == frame.relight_mode
