@@ -25,6 +25,11 @@ matters is not one light's but the panorama's sum's. The choice therefore looks 
    of the light they stand for (the lowest lights: the share outside the measured
    lights; the quarters: the rest).
 
+No split's error is below the error at the measured lights, so a candidate whose error so far
+plus that floor over the splits left is already above the best complete one's is stopped there
+(the quick candidates come first): the choice is the same, the slow rungs' fits on the splits
+are spared where they cannot win.
+
 The winner is refitted on every light and relights the sharp light through
 :class:`render.engines.predicted.PredictorRelightSettings` with ``split``, the sum the rest;
 when the sum itself wins (its nearest measured light predicts the held-out ones best), it
@@ -110,7 +115,8 @@ class CandidateScore:
     name : str
     error : float, relative RMSE (linear light) of the panorama-weighted held-out sum
     seconds : float, fitting and predicting on the splits
-    note : str, why it could not apply (its error is then infinite)
+    note : str, why it could not apply (its error is then infinite), or where it was stopped
+        as unable to win (its error is then a lower bound)
     """
 
     name: str
@@ -271,44 +277,53 @@ def choose_environment_mode(
         return EnvironmentChoice(environment_mode(LIGHT_STAGE), (), (), reason, parts.sharp_share)
     panorama = replace(panorama, rgb=parts.sharp)
     splits = held_out_splits(field, panorama)
-    errors: dict[str, list[float]] = {name: [] for name in names}
+    # The heaviest split first: a candidate that cannot win is stopped the sooner.
+    order = sorted(splits, key=lambda split: -split[3])
+    ratios = [_gap_ratio(field, panorama, split, below=split[0] == LOWEST) for split in order]
+    errors = dict.fromkeys(names, 0.0)
     seconds = dict.fromkeys(names, 0.0)
     notes: dict[str, str] = {}
-    bar = progress_bar(total=len(names) * len(splits), desc="choosing", unit="method")
+    # One part per split, kept for every candidate: the rungs built on one model fit it once.
+    subsets: dict[int, ReflectanceField] = {}
     everything = np.arange(field.shape[1], dtype=np.int64)
-    ratios = [_gap_ratio(field, panorama, split, below=split[0] == LOWEST) for split in splits]
-    inside: dict[str, float] = {}
+    lowest = math.inf  # the best complete candidate's error so far
+    bar = progress_bar(total=len(names) * len(order), desc="choosing", unit="method")
     try:
-        for ratio, (_, fit, test, weight) in zip(ratios, splits, strict=True):
-            # One part per split for every candidate: the rungs built on one model fit it once.
-            part = field.subset(lights=fit)
-            for name in names:
-                start = time.perf_counter()
-                if name not in notes:
-                    try:
-                        error = _summed_error(field, panorama, name, part, test)
-                        # The use's gaps are narrower than a held-out light's: the excess over
-                        # the error at the measured lights shrinks (rung_choice.UseGaps).
-                        if name not in inside:
-                            inside[name] = _summed_error(
-                                field, panorama, name, field, everything, models
-                            )
-                        excess = max(error**2 - inside[name] ** 2, 0.0) * ratio**GAP_EXPONENT
-                        errors[name].append(weight * math.sqrt(inside[name] ** 2 + excess))
-                    except NotApplicable as problem:  # a basis with more terms than the lights
-                        notes[name] = str(problem)
-                seconds[name] += time.perf_counter() - start
-                bar.update()
+        for name in names:  # the quick candidates first: they set the bar the slow ones meet
+            start = time.perf_counter()
+            done = 0
+            try:
+                # The use's gaps are narrower than a held-out light's: the excess over the
+                # error at the measured lights shrinks (rung_choice.UseGaps).
+                inside = _summed_error(field, panorama, name, field, everything, models)
+                for index, (_, fit, test, weight) in enumerate(order):
+                    # No split's term is below the measured lights' error: a bound on the rest.
+                    bound = errors[name] + inside * sum(split[3] for split in order[index:])
+                    if bound >= lowest:
+                        errors[name] = bound
+                        notes[name] = (
+                            f"stopped after {index} of {len(order)} splits: at least "
+                            f"{bound:.1%}, above the best's {lowest:.1%}"
+                        )
+                        break
+                    if index not in subsets:
+                        subsets[index] = field.subset(lights=fit)
+                    error = _summed_error(field, panorama, name, subsets[index], test)
+                    excess = max(error**2 - inside**2, 0.0) * ratios[index] ** GAP_EXPONENT
+                    errors[name] += weight * math.sqrt(inside**2 + excess)
+                    done += 1
+                    bar.update()
+                else:
+                    lowest = min(lowest, errors[name])
+            except NotApplicable as problem:  # a basis with more terms than the lights
+                errors[name], notes[name] = math.inf, str(problem)
+            bar.update(len(order) - done)
+            seconds[name] = time.perf_counter() - start
     finally:
         bar.close()
-    for name in notes:
-        errors[name] = [math.inf]
     scores = tuple(
         sorted(
-            (
-                CandidateScore(n, float(np.sum(errors[n])), seconds[n], notes.get(n, ""))
-                for n in names
-            ),
+            (CandidateScore(n, errors[n], seconds[n], notes.get(n, "")) for n in names),
             key=lambda score: score.error,
         )
     )

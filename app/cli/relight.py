@@ -189,7 +189,8 @@ def _relight_field(
     )
     prepared = prepare_relighting(field, request)
     for score in prepared.chosen.scores:
-        print(f"  {score.name:<22} {score.error:7.2%}  ({score.seconds:.1f} s)")
+        note = f" {score.note}" if score.note else ""
+        print(f"  {score.name:<22} {score.error:7.2%}  ({score.seconds:.1f} s){note}")
     if prepared.chosen.reason is not None:
         print(f"relighting mode: {prepared.chosen.reason}")
     for warning in prepared.warnings:

@@ -197,6 +197,23 @@ def test_a_sun_is_predicted_and_its_sky_is_summed(plane: ReflectanceField) -> No
     assert "the rest" in choice.reason and f"{choice.sharp_share:.0%}" in choice.reason
 
 
+def test_a_candidate_is_stopped_only_where_it_cannot_win(plane: ReflectanceField) -> None:
+    # The model predicts the plane exactly: the candidates after it are stopped once their
+    # error so far, with the floor of the splits left, is above its. Alone, each errs at least
+    # that much: the bound holds, and the choice is the one without stopping.
+    rgb = np.full((32, 64, 3), 0.05, dtype=np.float32)
+    rgb[9, 21] = 4000.0
+    sun = panorama_from_array(rgb, source="sun")
+    names = [LIGHT_STAGE, "lambert+ggx+residual", "barycentric", "hsh3"]
+    choice = choose_environment_mode(plane, sun, candidates=names)
+    stopped = [s for s in choice.scores if s.note.startswith("stopped after")]
+    assert stopped, choice.scores
+    for score in stopped:
+        alone = choose_environment_mode(plane, sun, candidates=[score.name]).scores[0]
+        assert alone.note == ""
+        assert choice.scores[0].error <= score.error <= alone.error + 1e-12, (score, alone)
+
+
 _CHOOSE = """
 import sys
 import numpy as np
