@@ -61,7 +61,8 @@ class EpochRecord:
     phase : "choose" (lights held out) or "final" (every light)
     epoch : int, passes so far in this phase
     seconds : float, since training began
-    train_error : float, mean squared error in the encoding on the lights trained on
+    train_error : float, mean squared error in the encoding of the pass's steps (each on the
+        lights it trained on, as the pass went)
     validation_error : float, the same on the held-out lights (NaN in the final phase)
     """
 
