@@ -102,7 +102,7 @@ def test_rig_view_stops_and_removes_its_temporaries(tmp_path: Path, number: int)
 @pytest.mark.parametrize("number", SIGNALS)
 def test_a_command_stopped_while_it_works_says_so(tmp_path: Path, number: int) -> None:
     scratch = tmp_path / "tmp"
-    # Training the learned rung takes minutes: the signal comes while it trains.
+    # Training the learned rung takes a minute or more: the signal comes while it trains.
     args = ["evaluate", str(RTI), "--split", "every-other", "--methods", "learned"]
     process = _rig(args, scratch, tmp_path)
     stderr = tmp_path / "stderr.txt"
