@@ -198,9 +198,9 @@ def test_a_sun_is_predicted_and_its_sky_is_summed(plane: ReflectanceField) -> No
 
 
 def test_a_candidate_is_stopped_only_where_it_cannot_win(plane: ReflectanceField) -> None:
-    # The model predicts the plane exactly: the candidates after it are stopped once their
-    # error so far, with the floor of the splits left, is above its. Alone, each errs at least
-    # that much: the bound holds, and the choice is the one without stopping.
+    # The model predicts the plane exactly: a candidate after it (interpolation) is stopped
+    # once its error so far, with the floor of the splits left, is above the model's. Alone,
+    # it errs at least that much: the bound holds, and the choice is the one without stopping.
     rgb = np.full((32, 64, 3), 0.05, dtype=np.float32)
     rgb[9, 21] = 4000.0
     sun = panorama_from_array(rgb, source="sun")
