@@ -30,6 +30,8 @@ PredictorName = Literal[
     "relief",
     "learned",
     "learned+residual",
+    "learned+relief",
+    "learned+relief+residual",
     "light-stage+lambert+ggx",
 ]
 #: Every method, the baselines first.

@@ -12,6 +12,11 @@ This module is the trained model, :class:`LearnedRTI`: its inference is plain nu
 matrix products), so relighting never imports PyTorch and a trained model is a handful of
 arrays.
 
+A model may be told each sample's visibility of each light (``shadowed``): the decoder then
+gives two colours, the sample lit and in shadow, mixed by the visibility, so the network does
+not have to learn where a cast shadow falls between the measured lights, only what it looks
+like; the visibility comes from elsewhere (a relief's shadows, :mod:`render.prediction_methods`).
+
 Values are learned in a perceptual encoding, ``(x / scale) ** (1 / GAMMA)``, as RTI tools learn
 8-bit images: the loss then weighs dark and bright regions as the PSNR on 8-bit sRGB does, and
 a highlight cannot own the fit.
@@ -21,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,7 +43,10 @@ __all__ = [
     "EpochRecord",
     "LearnedRTI",
     "light_features",
+    "shaded",
 ]
+
+ArrayT = TypeVar("ArrayT", bound=Any)
 
 #: Default length of each sample's code (neural RTI used 9); a model's own is ``model.code_size``.
 CODE_SIZE = 16
@@ -96,6 +105,8 @@ class LearnedRTI:
         trained on (a model without an encoder)
     coded : ndarray (M, 3T) float32 or None, those samples' encoded values, one row each
         (how :meth:`encode` finds a sample's code)
+    shadowed : bool, the decoder gives the colour lit and in shadow (six outputs), mixed by
+        the visibility :meth:`decode` is given
     """
 
     lights: NDArray[np.float32]
@@ -111,6 +122,7 @@ class LearnedRTI:
     device: str = "cpu"
     codes: NDArray[np.float32] | None = None
     coded: NDArray[np.float32] | None = None
+    shadowed: bool = False
 
     @property
     def code_size(self) -> int:
@@ -153,14 +165,29 @@ class LearnedRTI:
         return codes
 
     def decode(
-        self, codes: NDArray[np.floating], directions: NDArray[np.floating]
+        self,
+        codes: NDArray[np.floating],
+        directions: NDArray[np.floating],
+        visibility: NDArray[np.floating] | None = None,
     ) -> NDArray[np.float32]:
-        """Linear values (Q, N, 3) float32 of N coded samples (N, code) under Q lights (Q, 3)."""
+        """Linear values (Q, N, 3) float32 of N coded samples (N, code) under Q lights (Q, 3).
+
+        ``visibility`` (Q, N), 1 lit and 0 in shadow: required by a ``shadowed`` model only.
+        """
         codes = np.asarray(codes, dtype=np.float32)
         k = self.code_size
         if codes.ndim != 2 or codes.shape[1] != k:
             raise InputError(f"learned model: codes must have shape (N, {k}), got {codes.shape}")
         d = np.asarray(directions, dtype=np.float32).reshape(-1, 3)
+        if self.shadowed != (visibility is not None):
+            raise InputError(
+                "learned model: a visibility goes with a model trained with one, and only then"
+            )
+        v = None if visibility is None else np.asarray(visibility, dtype=np.float32)
+        if v is not None and v.shape != (len(d), len(codes)):
+            raise InputError(
+                f"learned model: visibility must have shape ({len(d)}, {len(codes)}), got {v.shape}"
+            )
         features = light_features(d, self.light_frequencies)
         (weight, bias), rest = self.decoder[0], self.decoder[1:]
         # The first layer is linear in (code, features): the code's part is computed once.
@@ -170,8 +197,21 @@ class LearnedRTI:
         for q in range(len(d)):
             hidden = from_codes + from_lights[q]
             y = _mlp(rest, _elu(hidden)) if rest else hidden
+            if v is not None:
+                y = shaded(y, v[q])
             out[q] = self.scale * np.maximum(y, 0.0) ** GAMMA
         return out
+
+
+def shaded(outputs: ArrayT, visibility: ArrayT) -> ArrayT:
+    """A shadowed decoder's colour (..., 3) from its outputs (..., 6) and visibility (...).
+
+    The first three outputs are the colour lit, the last three in shadow; numpy arrays or
+    PyTorch tensors (training uses the same mixing).
+    """
+    v = visibility[..., None]
+    mixed: ArrayT = v * outputs[..., :3] + (1 - v) * outputs[..., 3:]
+    return mixed
 
 
 def light_features(directions: NDArray[np.floating], frequencies: int) -> NDArray[np.float32]:

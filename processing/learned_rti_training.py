@@ -22,6 +22,9 @@ RTI domes (49 lights, 8-bit sRGB JPEG) and the bundled real capture:
 - the light encoding: Fourier features of the direction (``d``, ``sin``/``cos`` of
   ``2^f pi d``) let the small decoder follow sharp shadow edges and highlights;
 - capacity (decoder 128 wide, codes of 16) changed little with an encoder;
+- the codes' rate: a code is updated once a pass, the decoder every step; at ``code_rate`` 10
+  times the decoder's, learned+residual gained 0.15-0.45 dB at the time cap on three captures
+  and lost 0.22 on one (docs/evaluation.md);
 - the passes: a capture of few pixels makes its passes long before the time cap, so their
   cap (``epochs``) is set where the bundled capture's held-out error stops improving (every
   other light held out, learned+residual: 200, 400, 800 and 1,600 passes 33.88, 34.81, 35.07
@@ -59,6 +62,7 @@ from processing.learned_rti import (
     _encoded,
     _encoder_input,
     light_features,
+    shaded,
 )
 from processing.network_training import (
     Device,
@@ -96,6 +100,8 @@ class TrainingSettings:
         the time cap paid more than every light per step (module docstring)
     rate : float, initial learning rate (cosine decay to ``rate / 10`` over each phase, by
         its planned steps or its share of ``max_seconds``, whichever runs out first)
+    code_rate : float, the codes' learning rate as a multiple of ``rate`` (auto-decoder): a
+        code is updated once a pass, the decoder every step (module docstring)
     max_samples : int, samples drawn (at random) to train on; every sample is encoded
     max_seconds : float, training (both phases) stops after this long even if passes remain
     seed : int
@@ -120,6 +126,7 @@ class TrainingSettings:
     batch: int = 256
     lights_per_step: int | None = 24
     rate: float = 1e-2
+    code_rate: float = 10.0
     max_samples: int = 200_000
     max_seconds: float = 170.0
     seed: int = 0
@@ -153,7 +160,10 @@ class TrainingSettings:
             share="validation",
             also=(
                 (self.light_frequencies >= 0, "light_frequencies must be 0 or more"),
-                (self.rate > 0 and self.max_seconds > 0, "rate and max_seconds must be positive"),
+                (
+                    self.rate > 0 and self.code_rate > 0 and self.max_seconds > 0,
+                    "rate, code_rate and max_seconds must be positive",
+                ),
             ),
         )
 
@@ -163,6 +173,8 @@ def train_learned_rti(
     lights: NDArray[np.floating],
     settings: TrainingSettings = TrainingSettings(),
     progress: Callable[[int, int], None] | None = None,
+    *,
+    visibility: NDArray[np.floating] | None = None,
 ) -> LearnedRTI:
     """Train an encoder and decoder on N samples measured under T lights.
 
@@ -178,6 +190,8 @@ def train_learned_rti(
     settings : TrainingSettings
     progress : callable(step, planned), optional, called after each step; ``planned`` is the
         steps now foreseen (it shrinks when the held-out lights stop training early)
+    visibility : ndarray, shape (T, N), optional, each light's visibility at each sample (1
+        lit, 0 in shadow): the model is then ``shadowed`` (:class:`LearnedRTI`)
 
     Raises
     ------
@@ -192,6 +206,10 @@ def train_learned_rti(
     if len(directions) < 2:
         raise NotApplicable(f"learned model: it needs at least 2 lights, got {len(directions)}")
     v = _checked_values(values, len(directions))
+    if visibility is not None and np.shape(visibility) != v.shape[:2]:
+        raise InputError(
+            f"learned model: visibility must have shape {v.shape[:2]}, got {np.shape(visibility)}"
+        )
     finite = v[np.isfinite(v)]
     scale = float(np.percentile(finite, SCALE_PERCENTILE)) if finite.size else 0.0
     if not scale > 0:
@@ -209,7 +227,8 @@ def train_learned_rti(
     rng = np.random.default_rng(settings.seed)
     n = v.shape[1]
     chosen = np.sort(rng.choice(n, size=min(n, settings.max_samples), replace=False))
-    data = _Data(_encoded(v[:, chosen], scale), directions, settings, device)
+    shadows = None if visibility is None else np.asarray(visibility, np.float32)[:, chosen]
+    data = _Data(_encoded(v[:, chosen], scale), directions, shadows, settings, device)
     held = validation_lights(directions, settings.validation, seed=settings.seed)
     if len(directions) < 5:  # too few lights to spare any
         held = held[:0]
@@ -251,6 +270,7 @@ def train_learned_rti(
         device=device,
         codes=codes,
         coded=coded,
+        shadowed=visibility is not None,
     )
 
 
@@ -291,6 +311,7 @@ class _Data:
         self,
         encoded: NDArray[np.float32],
         directions: NDArray[np.float32],
+        visibility: NDArray[np.float32] | None,
         settings: TrainingSettings,
         device: str,
     ) -> None:
@@ -303,13 +324,19 @@ class _Data:
         self.values = torch.from_numpy(np.ascontiguousarray(encoded.transpose(1, 0, 2))).to(device)
         features = light_features(directions, settings.light_frequencies)
         self.features = torch.from_numpy(features).to(device)
+        told = None if visibility is None else np.ascontiguousarray(visibility.T)  # (N, T)
+        self.visibility = None if told is None else torch.from_numpy(told).to(device)
         self.start_codes = principal_codes(encoded, settings.code_size, settings.seed)
         monitor = np.random.default_rng(settings.seed + 1).permutation(self.count)
         self.monitor = torch.from_numpy(np.sort(monitor[:MONITOR_SAMPLES])).to(device)
 
+    def shadows(self, rows: torch.Tensor, lights: torch.Tensor) -> torch.Tensor | None:
+        """The visibility (B, Q) of ``lights`` at the samples ``rows`` (None: not told)."""
+        return None if self.visibility is None else self.visibility[rows][:, lights]
+
 
 def _networks(
-    settings: TrainingSettings, lights: int, start_codes: NDArray[np.float32]
+    settings: TrainingSettings, lights: int, start_codes: NDArray[np.float32], outputs: int
 ) -> tuple[torch.nn.Sequential | torch.nn.Parameter, torch.nn.Sequential]:
     """The coder (an encoder network, or free codes starting at ``start_codes``) and decoder."""
     import torch
@@ -321,14 +348,23 @@ def _networks(
         coder = torch_mlp([3 * lights, *[settings.encoder_width] * 3, k])
     else:
         coder = torch.nn.Parameter(torch.from_numpy(start_codes))
-    decoder = torch_mlp([k + features, *[settings.decoder_width] * settings.decoder_layers, 3])
+    decoder = torch_mlp(
+        [k + features, *[settings.decoder_width] * settings.decoder_layers, outputs]
+    )
     return coder, decoder
 
 
 def _decoded(
-    decoder: torch.nn.Sequential, codes: torch.Tensor, features: torch.Tensor
+    decoder: torch.nn.Sequential,
+    codes: torch.Tensor,
+    features: torch.Tensor,
+    visibility: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """Decoder outputs (B, Q, 3) of codes (B, k) under light features (Q, F)."""
+    """Colours (B, Q, 3) of codes (B, k) under light features (Q, F).
+
+    A shadowed decoder's outputs are mixed by the ``visibility`` (B, Q)
+    (:func:`processing.learned_rti.shaded`).
+    """
     import torch
 
     first = decoder[0]
@@ -339,7 +375,7 @@ def _decoded(
         features @ first.weight[:, k:].T
     )[None, :, :]
     out: torch.Tensor = decoder[1:](hidden)
-    return out
+    return out if visibility is None else shaded(out, visibility)
 
 
 def _train_phase(
@@ -360,15 +396,18 @@ def _train_phase(
     import torch
 
     torch.manual_seed(settings.seed)  # both phases start from the same networks
-    coder, decoder = _networks(settings, data.lights, data.start_codes)
+    outputs = 3 if data.visibility is None else 6
+    coder, decoder = _networks(settings, data.lights, data.start_codes, outputs)
     decoder.to(data.device)
+    # Each group's "rate" is its multiple of settings.rate, the schedule's factor.
+    parts: list[tuple[list[torch.Tensor], float]]
     if isinstance(coder, torch.nn.Sequential):
         coder.to(data.device)
-        parameters = [*coder.parameters(), *decoder.parameters()]
+        parts = [([*coder.parameters(), *decoder.parameters()], 1.0)]
     else:
         coder = torch.nn.Parameter(coder.detach().to(data.device))
-        parameters = [coder, *decoder.parameters()]
-    optimiser = adam([{"params": parameters, "lr": settings.rate}])
+        parts = [([coder], settings.code_rate), (list(decoder.parameters()), 1.0)]
+    optimiser = adam([{"params": p, "lr": settings.rate * r, "rate": r} for p, r in parts])
     planned = max(1, epochs * clock.steps_per_epoch)
     first_step, first_second = clock.step, clock.seconds()
     seconds = max(clock.second_limit - first_second, 1e-9)
@@ -399,10 +438,11 @@ def _train_phase(
             done = max(
                 (clock.step - first_step) / planned, (clock.seconds() - first_second) / seconds
             )
+            schedule = 0.1 + 0.45 * (1 + math.cos(math.pi * min(done, 1)))
             for group in optimiser.param_groups:
-                group["lr"] = settings.rate * (0.1 + 0.45 * (1 + math.cos(math.pi * min(done, 1))))
+                group["lr"] = settings.rate * group["rate"] * schedule
             codes = _codes(coder, inputs, rows)
-            predicted = _decoded(decoder, codes, data.features[seen])
+            predicted = _decoded(decoder, codes, data.features[seen], data.shadows(rows, seen))
             loss = torch.mean((predicted - data.values[rows][:, seen]) ** 2)
             optimiser.zero_grad()
             loss.backward()  # type: ignore[no-untyped-call]
@@ -453,5 +493,6 @@ def _held_error(
 
     with torch.no_grad():
         rows = data.monitor
-        out = _decoded(decoder, _codes(coder, inputs, rows), data.features[held])
+        codes = _codes(coder, inputs, rows)
+        out = _decoded(decoder, codes, data.features[held], data.shadows(rows, held))
         return float(torch.mean((out - data.values[rows][:, held]) ** 2))

@@ -166,6 +166,11 @@ def adam(parameters: Any) -> torch.optim.Adam:
     folder in the temp folder (``torchinductor_<user>``) and leaves it there: every training
     left one behind, although nothing here compiles. Unless the user chose that folder
     (``TORCHINDUCTOR_CACHE_DIR``), the import makes it in a temporary folder removed at once.
+
+    The update is PyTorch's fused one (one kernel over every parameter, on the CPU as on a
+    GPU): the learned rung's codes are a parameter of a row per sample, updated every step
+    although a step touches a few hundred rows, and the unfused update of 160,000 codes took
+    twice as long as the rest of the step.
     """
     import torch
 
@@ -176,7 +181,7 @@ def adam(parameters: Any) -> torch.optim.Adam:
                 import torch._dynamo
             finally:
                 os.environ.pop("TORCHINDUCTOR_CACHE_DIR", None)
-    return torch.optim.Adam(parameters)
+    return torch.optim.Adam(parameters, fused=True)
 
 
 def torch_mlp(sizes: list[int]) -> torch.nn.Sequential:

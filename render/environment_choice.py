@@ -67,6 +67,7 @@ from render.engines.predicted import PredictorRelightSettings
 from render.light_prediction import make_predictor
 from render.light_splits import lowest_lights
 from render.rung_choice import GAP_EXPONENT, LOWEST, light_folds
+from render.rung_choice import SLOW_CANDIDATES as RUNG_SLOW_CANDIDATES
 
 __all__ = [
     "ENVIRONMENT_CANDIDATES",
@@ -94,8 +95,9 @@ ENVIRONMENT_CANDIDATES = (
     "adaptive",
     "relief",
 )
-#: Candidates that train a network (minutes): left out by ``fast``.
-SLOW_CANDIDATES = ("learned+residual",)
+#: Candidates that train a network (minutes): left out by ``fast``; the single-light
+#: choice's (:data:`render.rung_choice.SLOW_CANDIDATES`).
+SLOW_CANDIDATES = RUNG_SLOW_CANDIDATES
 #: The fewest lights the choice splits.
 MIN_LIGHTS = 6
 #: Share of the panorama's light below the measured lights above which extrapolation is tested.

@@ -39,6 +39,10 @@ method                      what predicts the unmeasured light
 ``learned+residual``        trained on the capture (:mod:`processing.learned_rti`, the class
                             of neural RTI; about a minute of training on 2 cores), alone and
                             with the ``barycentric`` residual
+``learned+relief``,         the network told each light's visibility at each pixel by
+``learned+relief+residual``  ``relief`` (the measured marks at the measured lights): it
+                            learns each pixel lit and in shadow, the relief says where a
+                            cast shadow falls between the lights: pixel fields
 ==========================  ===============================================================
 
 Each method's predictor is :mod:`render.prediction_methods`'s, the RTI tools' fits
@@ -65,14 +69,13 @@ from processing.learned_rti_training import TrainingSettings
 from processing.sample_model_store import models_for_field
 from processing.sample_models import BASIS_MODELS, SampleModels, choose_model, fit_sample_models
 from render.engines.model_shading import prepare_lighting, relight_models
+from render.learned_predictor import TRAINED, LearnedPredictor
 from render.prediction_methods import (
-    _TRAINED,
     LightPredictor,
     MixturePredictor,
     _Adaptive,
     _Basis,
     _Interpolating,
-    _Learned,
     _Model,
     _Relief,
     _Residual,
@@ -108,11 +111,15 @@ def training_summary(
     curve : list of dict, per pass: phase, epoch, seconds, train_error, validation_error
         (None where no lights were held out)
     """
-    learned = predictor if isinstance(predictor, _Learned) else getattr(predictor, "base", None)
-    if not isinstance(learned, _Learned):
+    learned = getattr(predictor, "base", predictor)
+    if not isinstance(learned, LearnedPredictor):
         return "", []
-    trained = _TRAINED.get(learned.field, {})
-    models = [m for (_, settings), m in trained.items() if settings == learned.settings]
+    trained = TRAINED.get(learned.field, {})
+    shadowed = learned.shadows is not None
+    models = [
+        m for (_, settings, shadows), m in trained.items()
+        if settings == learned.settings and shadows == shadowed
+    ]  # fmt: skip
     if not models:
         return "", []
     model = models[0]
@@ -251,8 +258,12 @@ def make_predictor(
             else sigma
         )
         return _Interpolating(field, name, chosen)
-    if name.removesuffix("+residual") == "learned":
-        network = _Learned(field, "learned", learned or TrainingSettings())
+    if name.removesuffix("+residual") in ("learned", "learned+relief"):
+        shadows = make_predictor(field, "relief", models=models) if "+relief" in name else None
+        assert shadows is None or isinstance(shadows, _Relief)
+        network = LearnedPredictor(
+            field, name.removesuffix("+residual"), learned or TrainingSettings(), shadows
+        )
         return _Residual(field, name, network) if name.endswith("+residual") else network
     basis = name.removesuffix("-8bit")
     if basis in BASIS_MODELS:

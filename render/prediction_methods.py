@@ -5,8 +5,8 @@ here are their predictors: the interpolations of the measured images (nearest, b
 the RTI tools' rbf of :mod:`render.rti_fits`), the linear bases (PTM, HSH, in linear light or
 fitted to 8-bit values), the per-sample models, a model plus the interpolation of its residual
 (or the light-stage sum plus the model's correction), the adaptive mix of barycentric and
-model + residual, the model + residual with a relief's cast shadows, the learned model, and a
-per-pixel mixture of any of them.
+model + residual, the model + residual with a relief's cast shadows, and a per-pixel mixture
+of any of them; the learned model's is :mod:`render.learned_predictor`.
 
 Fitted predictions are bounded by what the data allow: at least 0 and at most
 :func:`bound_factor` times the sample's brightest measured value (per channel). A lobe
@@ -26,7 +26,6 @@ lights are the rig's upper hemisphere, where the hemispherical harmonics are def
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass, replace
 from dataclasses import field as default
 from typing import Protocol
@@ -40,9 +39,12 @@ from core.errors import InputError, NotApplicable
 from core.field_store import ReflectanceField
 from core.light_set import LightSet
 from core.progress import progress_bar
-from processing.interpolation import InterpolationMethod, interpolation_weights, mean_spacing_deg
-from processing.learned_rti import LearnedRTI
-from processing.learned_rti_training import TrainingSettings, train_learned_rti
+from processing.interpolation import (
+    DirectionWeights,
+    InterpolationMethod,
+    interpolation_weights,
+    mean_spacing_deg,
+)
 from processing.mark_distances import distance_marks, distance_share, mark_distances
 from processing.relief_shadows import (
     DECISIVE_TRAVEL,
@@ -328,7 +330,14 @@ class _Relief:
             self._moved[camera] = (distances, distance_share(*errors))
         return self._moved[camera]
 
-    def predict(self, camera: int, directions: NDArray[np.floating]) -> NDArray[np.float32]:
+    def visibility(
+        self, camera: int, directions: NDArray[np.floating]
+    ) -> tuple[NDArray[np.float32], DirectionWeights]:
+        """Each pixel's visibility (P, Q) of the lights (Q, 3), and their barycentric weights.
+
+        The measured marks at a measured light; between them, the relief's cast shadows where
+        they decide, the marks' moved edges elsewhere (the class's docstring).
+        """
         shape = self._image_shape()
         fit, frame = self._fit()
         measured = self.field.light_directions
@@ -360,6 +369,11 @@ class _Relief:
             cast = relief_visibility(heights, seen[decisive], visible)
             between = np.where(torn, cast, visibility[:, decisive])
             visibility[:, decisive] = despeckled(between, torn, shape)
+        return visibility, weights
+
+    def predict(self, camera: int, directions: NDArray[np.floating]) -> NDArray[np.float32]:
+        d = np.asarray(directions, dtype=np.float64)
+        visibility, weights = self.visibility(camera, d)
         unshadowed = self._unshadowed_model().predict(camera, d)
         correction = weights.apply(self.residual._residual_of(camera))
         return _bounded(self.field, camera, unshadowed * visibility.T[:, :, None] + correction)
@@ -399,74 +413,6 @@ class _Adaptive:
         helped = self.residual.predict(camera, directions)
         share = self.share(camera)[None, :, None]
         return _bounded(self.field, camera, share * helped + (1.0 - share) * alone)
-
-
-#: Trained networks by field (while it lives), so ``learned`` and ``learned+residual`` of one
-#: field train once.
-_TrainedKey = tuple[int, TrainingSettings]
-_TRAINED: weakref.WeakKeyDictionary[ReflectanceField, dict[_TrainedKey, LearnedRTI]]
-_TRAINED = weakref.WeakKeyDictionary()
-
-
-@dataclass
-class _Learned:
-    """The learned model of a field.
-
-    One network for a field of points (lights in the rig frame, every camera's samples), one
-    per camera for a field of pixels (lights in its frame).
-    """
-
-    field: ReflectanceField
-    name: str
-    settings: TrainingSettings
-    _codes: dict[int, NDArray[np.float32]] = default(default_factory=dict)
-
-    def _train(self, cameras: list[int], lights: NDArray[np.float64]) -> LearnedRTI:
-        # At most the samples training reads, drawn evenly from the cameras: a large field of
-        # points is never gathered whole.
-        rng = np.random.default_rng(self.settings.seed)
-        share = -(-self.settings.max_samples // len(cameras))
-        parts = []
-        for s in cameras:
-            seen = np.flatnonzero(self.field.visibility[s])
-            if seen.size > share:
-                seen = np.sort(rng.choice(seen, size=share, replace=False))
-            parts.append(self.field.camera_slab(s)[:, seen])
-        values = np.concatenate(parts, axis=1)
-        if values.shape[1] == 0:
-            raise InputError(f"{self.field.path}: no camera sees any sample; nothing to learn")
-        bar = progress_bar(desc="training", unit="step")
-
-        def advance(step: int, planned: int) -> None:
-            # The steps foreseen change as training learns its pace (a time budget).
-            if bar.total != planned:
-                bar.set_total(planned)
-            bar.update(step - bar.n)
-
-        try:
-            return train_learned_rti(values, lights, self.settings, advance)
-        finally:
-            bar.close()
-
-    def model(self, camera: int) -> LearnedRTI:
-        """The model that predicts ``camera``'s view (trained on first use)."""
-        key = (camera if self.field.sample_kind == "pixels" else -1, self.settings)
-        trained = _TRAINED.setdefault(self.field, {})
-        if key not in trained:
-            cameras = [camera] if key[0] >= 0 else list(range(self.field.shape[0]))
-            lights = _basis_frame_directions(self.field, camera, self.field.light_directions)
-            trained[key] = self._train(cameras, lights)
-        return trained[key]
-
-    def predict(self, camera: int, directions: NDArray[np.floating]) -> NDArray[np.float32]:
-        model = self.model(camera)
-        seen = self.field.visibility[camera]
-        if camera not in self._codes:
-            self._codes[camera] = model.encode(self.field.camera_slab(camera)[:, seen])
-        frame = _basis_frame_directions(self.field, camera, directions)
-        out = np.zeros((len(frame), self.field.shape[2], 3), dtype=np.float32)
-        out[:, seen] = model.decode(self._codes[camera], frame)
-        return _bounded(self.field, camera, out)
 
 
 @dataclass

@@ -104,6 +104,35 @@ def test_a_lambertian_object_is_learned_and_predicted_at_new_lights() -> None:
     assert error < 0.12 and error < baseline / 4, (error, baseline)
 
 
+def _horizons(lights: np.ndarray, samples: int = 120, seed: int = 0) -> np.ndarray:
+    """(T, N) visibility: each sample sees the lights above its own random horizon."""
+    rng = np.random.default_rng(seed)
+    horizon = rng.uniform(0.2, 0.8, samples)
+    return (lights[:, 2:3] > horizon[None, :]).astype(np.float32)
+
+
+def test_a_model_told_the_visibility_learns_the_samples_lit_and_in_shadow() -> None:
+    lights = hemisphere_layout(30, "fibonacci")
+    new = hemisphere_layout(9, "grid")
+    lit, seen = _horizons(lights), _horizons(new)
+    values = _lambertian(lights, 120) * lit[:, :, None]
+    truth = _lambertian(new, 120) * seen[:, :, None]
+    model = train_learned_rti(values, lights, QUICK, visibility=lit)
+    assert model.shadowed
+    codes = model.encode(values)
+    predicted = model.decode(codes, new, seen)
+    error = np.sqrt(np.sum((predicted - truth) ** 2) / np.sum(truth**2))
+    assert error < 0.12, error
+    # In shadow a Lambertian sample is black; told so, the model gives black.
+    assert model.decode(codes, new, np.zeros_like(seen)).max() < 0.02 * truth.max()
+    with pytest.raises(InputError, match="a visibility goes with a model trained with one"):
+        model.decode(codes, new)
+    with pytest.raises(InputError, match=r"visibility must have shape \(9, 120\)"):
+        model.decode(codes, new, seen[:, :5])
+    with pytest.raises(InputError, match=r"visibility must have shape \(30, 120\)"):
+        train_learned_rti(values, lights, QUICK, visibility=lit[:5])
+
+
 def test_an_encoder_can_make_the_codes() -> None:
     lights = hemisphere_layout(30, "fibonacci")
     new = hemisphere_layout(9, "grid")
