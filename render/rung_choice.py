@@ -73,10 +73,11 @@ LIGHT_CANDIDATES = (
     "adaptive",
     "relief",
 )
-#: Candidates that train a network: left out by ``fast``. The network told the relief's
-#: shadows, not the plain one: on six path-traced domes it scored 0.0-1.6 dB above it, on the
-#: bundled capture 0.36 below (docs/evaluation.md); both would add three trainings a choice.
-SLOW_CANDIDATES = ("learned+relief+residual",)
+#: Candidates that train a network: left out by ``fast``. Told the relief's shadows, the
+#: network scored 0.0-1.6 dB above the plain one on six path-traced domes, and 0.36 below on
+#: the bundled capture, whose choice with it alone fell to lambert+ggx+residual (1.5 dB
+#: below the plain one's): both, at three more trainings a choice (docs/evaluation.md).
+SLOW_CANDIDATES = ("learned+residual", "learned+relief+residual")
 #: Members of a mixture: the best candidates by score.
 MIXED = 3
 #: Gaussian width (pixels) the per-pixel errors are smoothed with before they weight.
