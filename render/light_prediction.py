@@ -78,6 +78,7 @@ from render.prediction_methods import (
     _Interpolating,
     _Model,
     _Relief,
+    _ReliefFits,
     _Residual,
 )
 from render.rti_fits import choose_rbf_sigma, sigma_subset
@@ -98,6 +99,9 @@ BATCH_BYTES = 256 * 2**20
 #: Model fits of in-memory fields (while they live), by the models fitted.
 _FITTED: weakref.WeakKeyDictionary[ReflectanceField, dict[tuple[str, ...], SampleModels]]
 _FITTED = weakref.WeakKeyDictionary()
+#: The relief rung's fits of fields (while they live), shared by ``relief`` and the network
+#: told its shadows: a choice's fold makes both, and fits the heights once.
+_RELIEFS: weakref.WeakKeyDictionary[ReflectanceField, _ReliefFits] = weakref.WeakKeyDictionary()
 
 
 def training_summary(
@@ -278,5 +282,7 @@ def make_predictor(
     if name == "adaptive":
         return _Adaptive(field, name, _Residual(field, "lambert+ggx+residual", base))
     if name == "relief":
-        return _Relief(field, name, _Residual(field, "lambert+ggx+residual", base))
+        # A fit the caller gave may not be the field's own: its relief is not shared.
+        fits = _RELIEFS.setdefault(field, _ReliefFits()) if models is None else _ReliefFits()
+        return _Relief(field, name, _Residual(field, "lambert+ggx+residual", base), fits)
     return _Residual(field, name, base) if name.endswith("+residual") else base

@@ -233,6 +233,25 @@ _NEGLIGIBLE = 1e-9
 
 
 @dataclass
+class _ReliefFits:
+    """What :class:`_Relief` fits of a field, per camera: shared by the predictors of one field.
+
+    The ``relief`` rung and the network told its shadows (``learned+relief``) are made apart,
+    a choice's fold makes both: sharing these, the heights are fitted once. Holds no
+    reference to the field, so a weak cache keyed by the field lets both go together.
+    """
+
+    heights: dict[int, NDArray[np.float32]] = default(default_factory=dict)
+    trusted: dict[int, NDArray[np.bool_]] = default(default_factory=dict)
+    #: Per camera (T, P): 1 where the relief reproduces a measured mark (or says nothing).
+    reproduced: dict[int, NDArray[np.float32]] = default(default_factory=dict)
+    #: Per camera: the measured marks' signed distances (T, P) and their weight (P,).
+    moved: dict[int, tuple[NDArray[np.float32], NDArray[np.float32]]] = default(
+        default_factory=dict
+    )
+
+
+@dataclass
 class _Relief:
     """``lambert+ggx+residual`` whose cast shadows between lights come from a fitted relief.
 
@@ -251,15 +270,8 @@ class _Relief:
     field: ReflectanceField
     name: str
     residual: _Residual
-    _heights: dict[int, NDArray[np.float32]] = default(default_factory=dict)
-    _trusted: dict[int, NDArray[np.bool_]] = default(default_factory=dict)
-    #: Per camera (T, P): 1 where the relief reproduces a measured mark (or says nothing).
-    _reproduced: dict[int, NDArray[np.float32]] = default(default_factory=dict)
+    fits: _ReliefFits = default(default_factory=_ReliefFits)
     _unshadowed: _Model | None = None
-    #: Per camera: the measured marks' signed distances (T, P) and their weight (P,).
-    _moved: dict[int, tuple[NDArray[np.float32], NDArray[np.float32]]] = default(
-        default_factory=dict
-    )
 
     def _fit(self) -> tuple[ParametricFit, NDArray[np.float64]]:
         model = self.residual.base
@@ -276,7 +288,7 @@ class _Relief:
 
     def heights(self, camera: int) -> NDArray[np.float32]:
         """The relief (H, W) fitted to ``camera``'s shadow marks, pixel units."""
-        if camera not in self._heights:
+        if camera not in self.fits.heights:
             fit, frame = self._fit()
             count = len(self.field.light_directions)
             visible = self.field.visibility[camera].reshape(self._image_shape())
@@ -287,10 +299,10 @@ class _Relief:
                     marks, normals, lights, visible, progress=lambda step, _: bar.update()
                 )
             contradictions = relief_contradictions(heights, marks, normals, lights, visible)
-            self._heights[camera] = heights
-            self._trusted[camera] = relief_disagreement(contradictions) <= TRUSTED_DISAGREEMENT
-            self._reproduced[camera] = (contradictions != 1).T.astype(np.float32)
-        return self._heights[camera]
+            self.fits.heights[camera] = heights
+            self.fits.trusted[camera] = relief_disagreement(contradictions) <= TRUSTED_DISAGREEMENT
+            self.fits.reproduced[camera] = (contradictions != 1).T.astype(np.float32)
+        return self.fits.heights[camera]
 
     def _unshadowed_model(self) -> _Model:
         """The model with every light reaching every pixel: shading without its marks."""
@@ -312,7 +324,7 @@ class _Relief:
         as this rung predicts: the images', not the marks', since marks mistaken for
         shadows (a brushed highlight) matter only as far as they change the image.
         """
-        if camera not in self._moved:
+        if camera not in self.fits.moved:
             shape = self._image_shape()
             fit, _ = self._fit()
             measured = self.field.light_directions
@@ -327,8 +339,8 @@ class _Relief:
             faded, moved = held_out[:, :, 3], distance_marks(held_out[:, :, 4])
             errors = [np.sum((unshadowed * m[:, :, None] + rest) ** 2, axis=(0, 2))
                       for m in (faded, moved)]  # fmt: skip
-            self._moved[camera] = (distances, distance_share(*errors))
-        return self._moved[camera]
+            self.fits.moved[camera] = (distances, distance_share(*errors))
+        return self.fits.moved[camera]
 
     def visibility(
         self, camera: int, directions: NDArray[np.floating]
@@ -360,10 +372,10 @@ class _Relief:
             # Fitted only now: the choices' scores at the measured lights cost no fit.
             heights = self.heights(camera)
             interpolated = marks[:, decisive]
-            reproduced = weights.apply(self._reproduced[camera]).T[:, decisive] > 0.5
+            reproduced = weights.apply(self.fits.reproduced[camera]).T[:, decisive] > 0.5
             torn = (
                 (interpolated > _UNANIMOUS[0]) & (interpolated < _UNANIMOUS[1]) & reproduced
-                & self._trusted[camera][:, None]
+                & self.fits.trusted[camera][:, None]
             )  # fmt: skip
             visible = self.field.visibility[camera].reshape(shape)
             cast = relief_visibility(heights, seen[decisive], visible)

@@ -275,7 +275,8 @@ def choose_light_rung(
             bar.update()
         for (_, fit, test), truth in zip(folds, truths, strict=True):
             # One part per fold for every candidate: the rungs built on one model (the model,
-            # its residual, the adaptive mixture) fit it once there. One fold at a time, as
+            # its residual, the adaptive mixture) fit it once there, and those on the relief
+            # (``relief``, the network told its shadows) its heights. One fold at a time, as
             # each part is a copy of most of the field.
             part = field.subset(lights=fit)
             for name in list(trials):

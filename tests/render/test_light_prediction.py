@@ -1,6 +1,8 @@
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -9,9 +11,12 @@ from core.camera_model import PinholeCamera, camera_to_rig
 from core.directions import hemisphere_layout
 from core.errors import InputError
 from core.field_store import FieldStoreWriter, ReflectanceField
+from processing import relief_shadows
 from processing.learned_rti_training import TrainingSettings
 from processing.relief_shadows import despeckled, relief_visibility
 from processing.sample_models import evaluate_basis
+from render import prediction_methods
+from render.learned_predictor import LearnedPredictor
 from render.light_prediction import PREDICTORS, make_predictor
 from render.prediction_methods import BOUND, BOUND_SPACING_DEG, bound_factor
 from render.rti_fits import RBF_SIGMAS, choose_rbf_sigma, rbf_weights
@@ -143,17 +148,12 @@ def test_every_method_has_a_predictor_and_unknown_ones_are_refused(tmp_path: Pat
         make_predictor(field, "splines")
 
 
-def _block_errors(
-    path: Path,
-    block: slice,
-    height: float,
-    elevation_deg: float,
-    names: tuple[str, ...] = ("relief", "lambert+ggx+residual"),
-) -> dict[str, float]:
-    """Mean squared errors of the methods ``names`` on a matte block.
+def _block_field(
+    path: Path, block: slice, height: float
+) -> tuple[ReflectanceField, Callable[[np.ndarray], np.ndarray]]:
+    """A 40 x 40 matte base with a square ``block`` of ``height`` pixels under 49 lights.
 
-    A 40 x 40 matte base with a square ``block`` of ``height`` pixels, measured under 49
-    lights, predicted at nine azimuths at ``elevation_deg``.
+    Returns the field and its radiance (T, P, 3) of camera-frame directions (T, 3).
     """
     size = 40
     heights = np.zeros((size, size))
@@ -165,7 +165,21 @@ def _block_errors(
         shade = 0.6 * np.clip(directions[:, 2], 0.0, None)[:, None] * lit
         return np.repeat(shade[:, :, None], 3, axis=2)
 
-    field = _pixel_field(path, values, lights=49, shape=(size, size))
+    return _pixel_field(path, values, lights=49, shape=(size, size)), values
+
+
+def _block_errors(
+    path: Path,
+    block: slice,
+    height: float,
+    elevation_deg: float,
+    names: tuple[str, ...] = ("relief", "lambert+ggx+residual"),
+) -> dict[str, float]:
+    """Mean squared errors of the methods ``names`` on :func:`_block_field`'s block.
+
+    Predicted at nine azimuths at ``elevation_deg``.
+    """
+    field, values = _block_field(path, block, height)
     elevation = np.radians(elevation_deg)
     azimuths = np.radians(np.arange(10.0, 360.0, 40.0))
     new = np.stack(
@@ -180,6 +194,33 @@ def _block_errors(
         )
         for name in names
     }
+
+
+def test_a_fields_relief_is_fitted_once_for_every_rung_that_uses_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A choice's fold makes the relief rung and the network told its shadows apart.
+    fitted: list[int] = []
+    fit = relief_shadows.relief_heights
+
+    def counted(*args: Any, **kwargs: Any) -> Any:
+        fitted.append(1)
+        return fit(*args, **kwargs)
+
+    monkeypatch.setattr(prediction_methods, "relief_heights", counted)
+    field, _ = _block_field(tmp_path / "f.zarr", slice(14, 26), 5.0)
+    relief = make_predictor(field, "relief")
+    learned = make_predictor(field, "learned+relief", learned=BRIEF)
+    assert isinstance(relief, prediction_methods._Relief)
+    assert isinstance(learned, LearnedPredictor) and learned.shadows is not None
+    assert np.array_equal(relief.heights(0), learned.shadows.heights(0))
+    assert len(fitted) == 1
+    # A fit the caller gives may not be the field's own: its relief is its own too.
+    models = relief.residual.base.models  # type: ignore[attr-defined]
+    given = make_predictor(field, "relief", models=models)
+    assert isinstance(given, prediction_methods._Relief)
+    given.heights(0)
+    assert len(fitted) == 2
 
 
 def test_the_relief_rung_moves_cast_shadows_between_the_measured_lights(tmp_path: Path) -> None:
