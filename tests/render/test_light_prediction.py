@@ -2,7 +2,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -11,7 +10,6 @@ from core.camera_model import PinholeCamera, camera_to_rig
 from core.directions import hemisphere_layout
 from core.errors import InputError
 from core.field_store import FieldStoreWriter, ReflectanceField
-from processing import relief_shadows
 from processing.learned_rti_training import TrainingSettings
 from processing.relief_shadows import despeckled, relief_visibility
 from processing.sample_models import evaluate_basis
@@ -21,6 +19,7 @@ from render.light_prediction import PREDICTORS, make_predictor
 from render.prediction_methods import BOUND, BOUND_SPACING_DEG, bound_factor
 from render.rti_fits import RBF_SIGMAS, choose_rbf_sigma, rbf_weights
 from sim.field import field_cameras, simulate_field
+from tests.call_counting import counting_calls
 
 HEIGHT, WIDTH = 4, 6
 #: A few steps of the learned model: these tests check its plumbing, not its accuracy.
@@ -200,14 +199,7 @@ def test_a_fields_relief_is_fitted_once_for_every_rung_that_uses_it(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # A choice's fold makes the relief rung and the network told its shadows apart.
-    fitted: list[int] = []
-    fit = relief_shadows.relief_heights
-
-    def counted(*args: Any, **kwargs: Any) -> Any:
-        fitted.append(1)
-        return fit(*args, **kwargs)
-
-    monkeypatch.setattr(prediction_methods, "relief_heights", counted)
+    fitted = counting_calls(monkeypatch, prediction_methods, "relief_heights")
     field, _ = _block_field(tmp_path / "f.zarr", slice(14, 26), 5.0)
     relief = make_predictor(field, "relief")
     learned = make_predictor(field, "learned+relief", learned=BRIEF)
