@@ -15,10 +15,13 @@ pixel, is its error at the measured lights plus its held-out excess scaled to th
 requested lights (:class:`UseGaps`: a held-out dome light is as far from the rest as the dome's
 spacing, a requested light usually lies between measured ones), on the 8-bit sRGB levels the RTI
 literature's PSNR compares. Objects mix materials (a matte base, a glossy figure, metal inlays),
-and the best rung differs between them; so the best :data:`MIXED` candidates are also mixed per
-pixel, each pixel weighting a member by the inverse of its expected error there (smoothed over
-a few pixels). The mixture is scored honestly: a fold's weights come from the errors of the
-other folds only. The winner, a rung or the mixture, predicts with its fits on every light.
+and the best rung differs between them; so the best candidates are also mixed per pixel, each
+pixel weighting a member by the inverse of its expected error there (smoothed over a few
+pixels): the best :data:`MIXED`; or, when the networks were trained, both and the best of the
+rest, and the two alone, the better-scored kept (two networks trained apart err apart and gain
+by their mean, and the folds judge a network least well). A mixture is scored honestly: a
+fold's weights come from the errors of the other folds only. The winner, a rung or the
+mixture, predicts with its fits on every light.
 
 Fields of pixels mix; a field of points chooses one rung (its samples have no image grid to
 smooth the errors over).
@@ -59,6 +62,7 @@ __all__ = [
     "UseGaps",
     "choose_light_rung",
     "light_folds",
+    "mixture_members",
 ]
 
 #: Quick candidates: the interpolations, the RTI tools' fits (on 8-bit values as they fit
@@ -78,7 +82,13 @@ LIGHT_CANDIDATES = (
 #: the bundled capture, whose choice with it alone fell to lambert+ggx+residual (1.5 dB
 #: below the plain one's): both, at three more trainings a choice (docs/evaluation.md).
 SLOW_CANDIDATES = ("learned+residual", "learned+relief+residual")
-#: Members of a mixture: the best candidates by score.
+#: Members of a mixture: the :data:`SLOW_CANDIDATES` that were trained, wherever they rank,
+#: then the best of the rest by score; and the networks alone (:func:`mixture_members`). Two
+#: networks trained apart err apart (the principled knot: 26.22 and 26.19 dB, their mean
+#: 26.79), and a fold, which trains a network on three quarters of the lights, judges it
+#: least well (there `learned+residual` came fifth, 1.6 dB below the best). Pairs, and more,
+#: of the quick rungs mixed worse: `relief` and `barycentric` on the glazed and plastic bowls
+#: (docs/evaluation.md).
 MIXED = 3
 #: Gaussian width (pixels) the per-pixel errors are smoothed with before they weight.
 ERROR_BLUR_PX = 1.5
@@ -216,6 +226,21 @@ def _weights(errors: Sequence[NDArray[np.float64]]) -> NDArray[np.float32]:
     return (inverse / inverse.sum(axis=0, keepdims=True)).astype(np.float32)
 
 
+def mixture_members(ranked: Sequence[str]) -> list[tuple[str, ...]]:
+    """The mixtures to try (:data:`MIXED`), from every candidate's name, best first.
+
+    The :data:`SLOW_CANDIDATES` among ``ranked`` and the best of the rest, :data:`MIXED` in
+    all; and the networks alone when two or more were trained. Each in its rank.
+    """
+    networks = [n for n in ranked if n in SLOW_CANDIDATES][:MIXED]
+    rest = [n for n in ranked if n not in SLOW_CANDIDATES][: MIXED - len(networks)]
+    chosen = {*networks, *rest}
+    tries = [tuple(n for n in ranked if n in chosen)]
+    if 2 <= len(networks) < len(tries[0]):
+        tries.append(tuple(networks))
+    return tries
+
+
 def choose_light_rung(
     field: ReflectanceField,
     queries: NDArray[np.floating] | None = None,
@@ -302,18 +327,24 @@ def choose_light_rung(
               for n in names]  # fmt: skip
     scores.sort(key=lambda s: -s.psnr)
     fold_names = tuple(name for name, _, _ in folds)
-    members = tuple(s.name for s in scores if s.name in trials)[:MIXED]
-    found = {n: trials[n].predictor for n in members[:1]}
-    if not keep or len(members) < 2:
+    applied = [s.name for s in scores if s.name in trials]
+    tries = mixture_members(applied)
+    found = {n: trials[n].predictor for n in applied[:1]}
+    if not keep or len(tries[0]) < 2:
         return RungChoice(scores[0].name, tuple(scores), fold_names, predictors=found)
-    mixture = _mixture_use_errors(
-        field, [trials[m] for m in members], gaps, measured, truths, scale
-    )
+    mixtures = {
+        members: _mixture_use_errors(
+            field, [trials[m] for m in members], gaps, measured, truths, scale
+        )
+        for members in tries
+    }
+    members = max(tries, key=lambda m: _psnr(mixtures[m]))
+    mixture = mixtures[members]
     weights = _weights([_smoothed(_full(field, use[m]), field) for m in members])
     mixed = RungScore("mixture", _psnr(mixture), sum(seconds[m] for m in members))
     ranked = tuple(sorted([*scores, mixed], key=lambda s: -s.psnr))
     name = "mixture" if mixed.psnr > scores[0].psnr + MIXTURE_MARGIN_DB else scores[0].name
-    found = {m: trials[m].predictor for m in (members if name == "mixture" else members[:1])}
+    found = {m: trials[m].predictor for m in (members if name == "mixture" else applied[:1])}
     return RungChoice(name, ranked, fold_names, members, weights, predictors=found)
 
 

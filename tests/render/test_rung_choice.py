@@ -17,6 +17,7 @@ from render.rung_choice import (
     UseGaps,
     choose_light_rung,
     light_folds,
+    mixture_members,
 )
 from sim.rti_capture import write_rti_capture
 from tests.full_disk import run_limited
@@ -95,6 +96,16 @@ def test_two_materials_are_predicted_by_a_rung_or_a_mixture_that_beats_each_alon
     if choice.name == "mixture":
         assert isinstance(predictor, MixturePredictor)
         assert scores["mixture"] > max(v for k, v in scores.items() if k != "mixture")
+
+
+def test_a_mixture_holds_both_networks_wherever_they_rank() -> None:
+    quick = ["relief", "adaptive", "barycentric", "rbf"]
+    assert mixture_members(quick) == [("relief", "adaptive", "barycentric")]
+    nets = ("learned+relief+residual", "learned+residual")
+    ranked = [nets[0], "relief", "adaptive", "rbf", nets[1]]
+    assert mixture_members(ranked) == [(nets[0], "relief", nets[1]), nets]
+    assert mixture_members([nets[1], nets[0]]) == [(nets[1], nets[0])]
+    assert mixture_members(["relief", nets[1]]) == [("relief", nets[1])]
 
 
 def test_a_basis_that_cannot_apply_is_said_and_skipped(tmp_path: Path) -> None:
